@@ -1,0 +1,241 @@
+"""NOMA and OMA downlink of one AP cluster (SPEC 2.6, paper Sec. II-B).
+
+Pure, vectorised numpy functions on linear quantities (watts, linear power gains), broadcasting over
+any leading batch dimensions: the last axis is the robot axis (length U). They are shared by the
+environment, the planners and the tests.
+
+Notation: ``g_u`` is robot u's channel power gain from the AP (path loss and small-scale fading,
+linear), ``I_u`` the interference power it receives from the external interferers over the whole
+cluster band ``W = U B`` (the interferers spread their power evenly over ``W``), ``N0`` the noise
+power spectral density and ``p_u`` the transmit power the AP allocates to robot u.
+"""
+
+import math
+from typing import Literal, NamedTuple
+
+import numpy as np
+
+MultipleAccess = Literal["noma", "oma"]
+MULTIPLE_ACCESS: tuple[str, ...] = ("noma", "oma")
+
+#: SINRs are reported in dB with this floor, so that a robot given no power (action -1) has a finite
+#: SINR instead of -inf (its rate is exactly 0 either way).
+SINR_DB_FLOOR = -300.0
+_SINR_FLOOR = 10.0 ** (SINR_DB_FLOOR / 10.0)
+_TINY = float(np.finfo(np.float64).tiny)
+
+
+class DownlinkResult(NamedTuple):
+    """Per-robot outcome of one downlink transmission; arrays of shape (..., U)."""
+
+    rate_bps: np.ndarray
+    """Achievable rate ``B_eff log2(1 + SINR)`` in bit/s."""
+    sinr_db: np.ndarray
+    """SINR in dB, floored at :data:`SINR_DB_FLOOR`."""
+    decoding_order: np.ndarray
+    """Robot indices from the weakest to the strongest equivalent gain (the SIC order; in OMA mode the
+    same ordering, informational only)."""
+
+
+def allocate_power(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
+    """
+    Map power actions to transmit powers (SPEC 2.6): ``p_u = P_max (a_u + 1) / 2``; if
+    ``sum_u p_u > P_max``, all powers are scaled down by the same factor so that they sum to ``P_max``
+    (the AP's power constraint, paper eq. (12e)).
+
+    :param power_actions: actions ``a_u``, shape (..., U); clipped to [-1, 1]
+    :param max_power_w: ``P_max`` in watts
+    :return: allocated powers in watts, shape (..., U), summing to at most ``P_max``
+    """
+    # np.minimum/np.maximum rather than np.clip: the env calls this every step on tiny arrays.
+    power = (0.5 * max_power_w) * (np.minimum(np.maximum(power_actions, -1.0), 1.0) + 1.0)
+    total = power.sum(axis=-1, keepdims=True)
+    return power * np.minimum(1.0, max_power_w / np.maximum(total, _TINY))
+
+
+def equivalent_gain(gain: np.ndarray, interference_w: np.ndarray, noise_w: float | np.ndarray) -> np.ndarray:
+    """
+    Equivalent channel gain ``G_u = g_u / (I_u + N0 W)`` (paper eq. (7)), the SIC ordering criterion.
+
+    :param gain: linear channel gains ``g_u``, shape (..., U)
+    :param interference_w: interference powers ``I_u`` in watts, shape (..., U)
+    :param noise_w: noise power over the cluster band, ``N0 W`` in watts
+    :return: ``G_u``, shape (..., U)
+    """
+    return gain / (interference_w + noise_w)
+
+
+def decoding_order(equivalent_gains: np.ndarray) -> np.ndarray:
+    """
+    SIC decoding order (paper eq. (8)-(9)): robot indices sorted from the weakest to the strongest
+    equivalent gain. Ties are broken by robot index (a lower index counts as weaker).
+
+    :param equivalent_gains: ``G_u``, shape (..., U)
+    :return: integer indices, shape (..., U)
+    """
+    return np.argsort(equivalent_gains, axis=-1, kind="stable")
+
+
+def noma_sinr(
+    power_w: np.ndarray,
+    gain: np.ndarray,
+    interference_w: np.ndarray,
+    noise_w: float | np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Downlink NOMA SINR with SIC (SPEC 2.6, paper eq. (10)-(11) with the signal powers squared out).
+
+    Robot u cancels the signals of every robot weaker than itself; the signals of stronger robots
+    stay as intra-cluster interference:
+    ``SINR_u = p_u g_u / (g_u sum_{v stronger than u} p_v + I_u + N0 W)``.
+
+    :param power_w: allocated powers ``p_u`` in watts, shape (..., U)
+    :param gain: linear channel gains ``g_u``, shape (..., U)
+    :param interference_w: interference powers ``I_u`` over the cluster band in watts, shape (..., U)
+    :param noise_w: noise power over the cluster band, ``N0 W`` in watts
+    :return: linear SINRs (..., U) and the decoding order (..., U), weakest first
+    """
+    power_w, gain, interference_w = np.asarray(power_w), np.asarray(gain), np.asarray(interference_w)
+    order = decoding_order(equivalent_gain(gain, interference_w, noise_w))
+    rank = np.argsort(order, axis=-1)  # position of each robot in the decoding order
+    # stronger[u] = sum of p_v over the robots v decoded after u (rank_v > rank_u): a U x U mask, cheaper
+    # than sorting and scattering back for the few robots of one NOMA cluster.
+    stronger = ((rank[..., None, :] > rank[..., :, None]) * power_w[..., None, :]).sum(axis=-1)
+    sinr = power_w * gain / (gain * stronger + interference_w + noise_w)
+    return sinr, order
+
+
+def oma_sinr(
+    power_w: np.ndarray,
+    gain: np.ndarray,
+    interference_w: np.ndarray,
+    noise_w_per_robot: float | np.ndarray,
+) -> np.ndarray:
+    """
+    Downlink OMA (FDMA) SINR (SPEC 2.6): each robot has its own band ``B = W / U``, which carries a
+    ``1/U`` share of the interference spread over ``W``:
+    ``SINR_u = p_u g_u / (I_u / U + N0 B)``.
+
+    :param power_w: allocated powers ``p_u`` in watts, shape (..., U)
+    :param gain: linear channel gains ``g_u``, shape (..., U)
+    :param interference_w: interference powers ``I_u`` over the whole cluster band ``W``, shape (..., U)
+    :param noise_w_per_robot: noise power over one robot's band, ``N0 B`` in watts
+    :return: linear SINRs, shape (..., U)
+    """
+    n_robots = np.shape(power_w)[-1]
+    return power_w * gain / (interference_w / n_robots + noise_w_per_robot)
+
+
+def shannon_rate(sinr: np.ndarray, bandwidth_hz: float) -> np.ndarray:
+    """
+    Achievable rate ``B log2(1 + SINR)`` in bit/s (paper eq. (11)).
+
+    :param sinr: linear SINRs
+    :param bandwidth_hz: bandwidth ``B`` in Hz
+    :return: rates in bit/s
+    """
+    return bandwidth_hz * np.log2(1.0 + sinr)
+
+
+def sinr_to_db(sinr: np.ndarray) -> np.ndarray:
+    """Linear SINR to dB, floored at :data:`SINR_DB_FLOOR` (0 W gives the floor, not -inf)."""
+    return 10.0 * np.log10(np.maximum(sinr, _SINR_FLOOR))
+
+
+def downlink(
+    power_w: np.ndarray,
+    gain: np.ndarray,
+    interference_w: np.ndarray,
+    bandwidth_per_robot_hz: float,
+    noise_w_per_hz: float,
+    multiple_access: MultipleAccess = "noma",
+) -> DownlinkResult:
+    """
+    Rates, SINRs and the decoding order of one downlink transmission to U robots (SPEC 2.6).
+
+    NOMA uses the whole cluster band ``W = U B`` for every robot, with SIC; OMA gives each robot its own
+    band ``B``. In both modes the decoding order is the order of the equivalent gains ``G_u``
+    (:func:`equivalent_gain`, with the cluster-band noise ``N0 W``).
+
+    :param power_w: allocated powers ``p_u`` in watts (see :func:`allocate_power`), shape (..., U)
+    :param gain: linear channel gains ``g_u`` from the AP, shape (..., U)
+    :param interference_w: interference powers ``I_u`` over the cluster band in watts, shape (..., U)
+    :param bandwidth_per_robot_hz: ``B`` in Hz
+    :param noise_w_per_hz: noise power spectral density ``N0`` in W/Hz
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :return: a :class:`DownlinkResult` (rate in bit/s, SINR in dB, decoding order)
+    """
+    power_w, gain, interference_w = np.asarray(power_w), np.asarray(gain), np.asarray(interference_w)
+    n_robots = power_w.shape[-1]
+    cluster_band_hz = n_robots * bandwidth_per_robot_hz
+    if multiple_access == "noma":
+        sinr, order = noma_sinr(power_w, gain, interference_w, noise_w_per_hz * cluster_band_hz)
+        rate = shannon_rate(sinr, cluster_band_hz)
+    elif multiple_access == "oma":
+        sinr = oma_sinr(power_w, gain, interference_w, noise_w_per_hz * bandwidth_per_robot_hz)
+        order = decoding_order(equivalent_gain(gain, interference_w, noise_w_per_hz * cluster_band_hz))
+        rate = shannon_rate(sinr, bandwidth_per_robot_hz)
+    else:
+        raise ValueError(f"multiple_access must be one of {MULTIPLE_ACCESS}, got {multiple_access!r}")
+    return DownlinkResult(rate_bps=rate, sinr_db=sinr_to_db(sinr), decoding_order=order)
+
+
+def single_transmission(
+    power_actions: list[float],
+    gain: list[float],
+    interference_w: list[float],
+    max_power_w: float,
+    bandwidth_per_robot_hz: float,
+    noise_w_per_hz: float,
+    multiple_access: MultipleAccess = "noma",
+) -> tuple[np.ndarray, DownlinkResult]:
+    """
+    :func:`allocate_power` followed by :func:`downlink` for one transmission, computed on Python floats.
+
+    This is the env's per-step path: for the few robots of one cluster, plain float arithmetic is several
+    times faster than numpy calls on arrays of U elements (the env's speed bar). The tests check that it
+    equals the vectorised functions.
+
+    :param power_actions: power actions ``a_u`` (U floats), clipped to [-1, 1]
+    :param gain: linear channel gains ``g_u`` (U floats)
+    :param interference_w: interference powers ``I_u`` over the cluster band in watts (U floats)
+    :param max_power_w: ``P_max`` in watts
+    :param bandwidth_per_robot_hz: ``B`` in Hz
+    :param noise_w_per_hz: ``N0`` in W/Hz
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :return: the allocated powers (U,) and the :class:`DownlinkResult`
+    """
+    n_robots = len(power_actions)
+    power = [0.5 * max_power_w * (min(max(a, -1.0), 1.0) + 1.0) for a in power_actions]
+    total = sum(power)
+    if total > max_power_w:
+        power = [p * (max_power_w / total) for p in power]
+    cluster_band_hz = n_robots * bandwidth_per_robot_hz
+    cluster_noise_w = noise_w_per_hz * cluster_band_hz
+    equivalent = [g / (i + cluster_noise_w) for g, i in zip(gain, interference_w, strict=True)]
+    order = sorted(range(n_robots), key=equivalent.__getitem__)  # stable, like decoding_order()
+    sinr = [0.0] * n_robots
+    if multiple_access == "noma":
+        stronger = 0.0
+        for u in reversed(order):  # from the strongest: its stronger robots' power is already summed
+            sinr[u] = power[u] * gain[u] / (gain[u] * stronger + interference_w[u] + cluster_noise_w)
+            stronger += power[u]
+        band_hz = cluster_band_hz
+    elif multiple_access == "oma":
+        noise_w = noise_w_per_hz * bandwidth_per_robot_hz
+        for u in range(n_robots):
+            sinr[u] = power[u] * gain[u] / (interference_w[u] / n_robots + noise_w)
+        band_hz = bandwidth_per_robot_hz
+    else:
+        raise ValueError(f"multiple_access must be one of {MULTIPLE_ACCESS}, got {multiple_access!r}")
+    result = DownlinkResult(
+        rate_bps=np.array([band_hz * math.log2(1.0 + x) for x in sinr]),
+        sinr_db=np.array([10.0 * math.log10(max(x, _SINR_FLOOR)) for x in sinr]),
+        decoding_order=np.array(order, dtype=np.int64),
+    )
+    return np.array(power), result
+
+
+def in_outage(rate_bps: np.ndarray, qos_rate_bps: float) -> np.ndarray:
+    """Outage (SPEC 2.6, paper eq. (12)): ``rate_u < qos_rate_bps``, as a bool array."""
+    return rate_bps < qos_rate_bps

@@ -1,0 +1,320 @@
+"""The radio map of a scenario (SPEC 2.3, 2.5; the paper's Section III): path-loss, power and SINR maps.
+
+All maps have shape ``(nx, ny)``, are indexed ``[ix, iy]`` and hold values at the cell centres at
+the robots' antenna height. Every link uses the expected Rayleigh fading
+(:data:`~noma_radiomap.propagation.EXPECTED_FADING_DB`), so the maps are the statistical channel
+the paper trains on (its Eq. (Radio.map)).
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from noma_radiomap import geometry
+from noma_radiomap.propagation import EXPECTED_FADING_DB, dbm_to_watt, noise_power_dbm, path_loss_db, watt_to_dbm
+from noma_radiomap.scenario import Scenario
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+
+class RadioMap:
+    """
+    Radio map of a scenario, built once (use :meth:`for_scenario` for the shared, cached instance).
+
+    Attributes (arrays of shape ``(nx, ny)``, indexed ``[ix, iy]``):
+
+    - ``blocked``: cells that block motion (SPEC 2.2);
+    - ``bottom``, ``top``: the paper's layout height matrices (:func:`~noma_radiomap.geometry.height_matrices`);
+    - ``n_obstacles[name]``: distinct obstacles crossed from transmitter ``name`` (``"ap"`` or an
+      interferer's name) to each cell;
+    - ``path_loss_db[name]``: path loss (SPEC 2.3) from each transmitter;
+    - ``gain_db[name]``: channel gain with the expected fading, ``-path_loss_db + EXPECTED_FADING_DB``;
+    - ``power_map_dbm``: power received from the AP at full power ``P_max`` (paper Fig. 4a);
+    - ``interference_dbm``: total power received from all interferers (``-inf`` without interferers);
+    - ``sinr_map_db``: single-robot SINR with the AP at full power and all interferers on (paper
+      Fig. 4b), with the corrected formula of SPEC 2.5:
+      ``SINR = P_AP g_AP / (sum_i P_i g_i + N0 W)``, ``W = U x B`` the NOMA cluster bandwidth over
+      which the interferers spread their power (SPEC 2.6) and the noise ``N0 W``.
+
+    :param scenario: the scenario
+    """
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        room = scenario.room
+        self.resolution = room.resolution
+        self.shape = (room.nx, room.ny)
+        self.nx, self.ny = self.shape
+        boxes, self.box_owner = scenario.boxes_array()
+        #: The snapped (Lego) boxes used for occlusion, (n_boxes, 6).
+        self.boxes = geometry.snapped_boxes_m(boxes, room.resolution, self.shape)
+        self.blocked = geometry.occupancy_grid(boxes, room.width, room.depth, room.resolution, scenario.robot.body_height)
+        self.bottom, self.top = geometry.height_matrices(boxes, room.width, room.depth, room.resolution)
+        #: Cell centres, (nx, ny, 2).
+        self.centers = self.cell_center(*np.meshgrid(np.arange(self.nx), np.arange(self.ny), indexing="ij"))
+        receivers = np.concatenate(
+            [self.centers.reshape(-1, 2), np.full((self.nx * self.ny, 1), scenario.robot.antenna_height)], axis=1
+        )
+
+        self.transmitters: dict[str, tuple[np.ndarray, float]] = {
+            "ap": (np.asarray(scenario.ap.position), scenario.ap.max_power_dbm)
+        }
+        for interferer in scenario.interferers:
+            self.transmitters[interferer.name] = (np.asarray(interferer.position), interferer.power_dbm)
+
+        radio = scenario.radio
+        self.n_obstacles: dict[str, np.ndarray] = {}
+        self.path_loss_db: dict[str, np.ndarray] = {}
+        self.gain_db: dict[str, np.ndarray] = {}
+        for name, (position, _) in self.transmitters.items():
+            counts = geometry.count_obstacles(position, receivers, self.boxes, self.box_owner)
+            distance = np.linalg.norm(receivers - position, axis=1)
+            loss = path_loss_db(
+                distance,
+                counts,
+                frequency_mhz=radio.frequency_mhz,
+                nlos_distance_coefficient=radio.nlos_distance_coefficient,
+                wall_loss_db=radio.wall_loss_db,
+                wall_loss_step_db=radio.wall_loss_step_db,
+            )
+            self.n_obstacles[name] = counts.reshape(self.shape)
+            self.path_loss_db[name] = loss.reshape(self.shape)
+            self.gain_db[name] = -self.path_loss_db[name] + EXPECTED_FADING_DB
+
+        #: Cluster bandwidth ``W = U x B`` (Hz) and the noise power over it (dBm).
+        self.bandwidth_hz = scenario.n_robots * radio.bandwidth_per_robot_hz
+        self.noise_dbm = float(noise_power_dbm(radio.noise_dbm_per_hz, self.bandwidth_hz))
+        self.power_map_dbm = scenario.ap.max_power_dbm + self.gain_db["ap"]
+        interference_w = np.zeros(self.shape)
+        for interferer in scenario.interferers:
+            interference_w += dbm_to_watt(interferer.power_dbm + self.gain_db[interferer.name])
+        self.interference_w = interference_w
+        self.interference_dbm = watt_to_dbm(interference_w)
+        self.sinr_map_db = self.power_map_dbm - watt_to_dbm(interference_w + dbm_to_watt(self.noise_dbm))
+        for array in (self.blocked, self.bottom, self.top, self.power_map_dbm, self.sinr_map_db, self.interference_w):
+            array.setflags(write=False)
+        for mapping in (self.n_obstacles, self.path_loss_db, self.gain_db):
+            for array in mapping.values():
+                array.setflags(write=False)
+
+    @classmethod
+    def for_scenario(cls, scenario: Scenario) -> RadioMap:
+        """
+        The shared radio map of a scenario, built on first use and cached by the scenario's content
+        (equal scenarios share one map; the arrays are read-only).
+
+        :param scenario: the scenario
+        :return: the cached radio map
+        """
+        return _cached_radio_map(scenario)
+
+    # ----------------------------------------------------------------------------------------------
+    # Derived maps
+    # ----------------------------------------------------------------------------------------------
+
+    def rate_map_bps(self) -> np.ndarray:
+        """
+        Single-robot rate with the whole AP power: ``W log2(1 + SINR)`` over the cluster bandwidth ``W``.
+
+        :return: float (nx, ny)
+        """
+        return self.bandwidth_hz * np.log2(1.0 + np.power(10.0, self.sinr_map_db / 10.0))
+
+    def outage_map(self) -> np.ndarray:
+        """
+        Cells where a single robot given the whole AP power fails the QoS:
+        ``W log2(1 + SINR) < qos_rate_bps`` (SPEC 2.1, 2.6). Computed for every cell, blocked or not.
+
+        :return: bool (nx, ny)
+        """
+        return self.rate_map_bps() < self.scenario.radio.qos_rate_bps
+
+    def outage_share(self) -> float:
+        """
+        Fraction of the free cells in :meth:`outage_map` (SPEC 2.1 asks 15-60 % for ``mall``).
+
+        :return: a number in [0, 1]
+        """
+        return float(self.outage_map()[~self.blocked].mean())
+
+    # ----------------------------------------------------------------------------------------------
+    # Indexing and geometry helpers
+    # ----------------------------------------------------------------------------------------------
+
+    def cell_index(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Cell indices of positions: ``ix = floor(x / res)``, clipped to the grid.
+
+        :param xy: (..., 2) positions in metres
+        :return: ``(ix, iy)``, int arrays of shape (...)
+        """
+        return geometry.point_cell(xy, self.resolution, self.shape)
+
+    def cell_center(self, ix: np.ndarray | int, iy: np.ndarray | int) -> np.ndarray:
+        """
+        Centres of cells: ``((ix + 0.5) res, (iy + 0.5) res)``.
+
+        :param ix: cell index/indices along x
+        :param iy: cell index/indices along y
+        :return: (..., 2) positions in metres
+        """
+        return np.stack(
+            [
+                (np.asarray(ix, dtype=np.float64) + 0.5) * self.resolution,
+                (np.asarray(iy, dtype=np.float64) + 0.5) * self.resolution,
+            ],
+            axis=-1,
+        )
+
+    def obstacles_crossed(self, tx_xyz: np.ndarray, rx_xyz: np.ndarray) -> int:
+        """
+        Number of distinct obstacles the segment from ``tx_xyz`` to ``rx_xyz`` crosses (SPEC 2.2).
+
+        :param tx_xyz: transmitter antenna position ``(x, y, z)``
+        :param rx_xyz: receiver antenna position ``(x, y, z)``
+        :return: obstacle count (0 = LoS)
+        """
+        return int(
+            geometry.count_obstacles(
+                np.asarray(tx_xyz, dtype=np.float64), np.asarray(rx_xyz, dtype=np.float64), self.boxes, self.box_owner
+            )[0]
+        )
+
+    def start_cells(self, robot: int) -> np.ndarray:
+        """
+        Free cells of a robot's start region (starts are drawn uniformly from them).
+
+        :param robot: robot index
+        :return: int (k, 2) cells ``[ix, iy]``, k >= 1
+        """
+        cells = geometry.region_cells(self.scenario.robots[robot].start, self.resolution, self.shape)
+        return cells[~self.blocked[cells[:, 0], cells[:, 1]]]
+
+    def distance_field(self, goal_xy: np.ndarray, cost: np.ndarray | None = None) -> np.ndarray:
+        """
+        Geodesic distance (m) from every cell to the cell of ``goal_xy`` (8-connected grid, no corner
+        cutting; ``inf`` on blocked/unreachable cells). Cached per goal cell when ``cost`` is None.
+
+        :param goal_xy: goal position ``(x, y)`` in metres
+        :param cost: optional extra cost per metre per cell (see :func:`~noma_radiomap.geometry.grid_graph`)
+        :return: float (nx, ny), read-only when cached
+        """
+        ix, iy = self.cell_index(np.asarray(goal_xy, dtype=np.float64))
+        if cost is not None:
+            return geometry.grid_distance_field(self.blocked, (int(ix), int(iy)), self.resolution, cost)
+        return self._distance_field_cached(int(ix), int(iy))
+
+    @functools.lru_cache(maxsize=64)  # noqa: B019 - the map lives as long as its cache entry anyway
+    def _distance_field_cached(self, ix: int, iy: int) -> np.ndarray:
+        field = geometry.grid_distance_field(self.blocked, (ix, iy), self.resolution)
+        field.setflags(write=False)
+        return field
+
+    # ----------------------------------------------------------------------------------------------
+    # Plotting (paper Fig. 4); matplotlib is imported lazily
+    # ----------------------------------------------------------------------------------------------
+
+    def plot(
+        self,
+        ax: Axes | None = None,
+        kind: str = "sinr",
+        show_obstacles: bool = True,
+        show_transmitters: bool = True,
+        show_outage: bool = True,
+        colorbar: bool = True,
+        **imshow_kwargs: Any,
+    ) -> Axes:
+        """
+        Draw a map as a heat map with obstacle footprints outlined (solid: blocks motion; dashed:
+        hanging, blocks rays only; whole-room slabs are not drawn) and the AP and interferers marked
+        (interferers outside the room are drawn at the nearest point of the border, hollow).
+
+        :param ax: axes to draw on (a new figure when None)
+        :param kind: ``"sinr"`` (dB) or ``"power"`` (received AP power, dBm)
+        :param show_obstacles: outline the obstacles
+        :param show_transmitters: mark the AP and the interferers
+        :param show_outage: on the SINR map, outline the outage region of :meth:`outage_map` (red)
+        :param colorbar: add a colour bar
+        :param imshow_kwargs: passed to ``ax.imshow`` (e.g. ``cmap``, ``vmin``, ``vmax``)
+        :return: the axes
+        """
+        import matplotlib.pyplot as plt
+        from matplotlib.patches import Rectangle
+
+        if kind not in ("sinr", "power"):
+            raise ValueError(f"kind: expected 'sinr' or 'power', got {kind!r}")
+        if ax is None:
+            _, ax = plt.subplots(figsize=(8, 4.8))
+        room = self.scenario.room
+        values = self.sinr_map_db if kind == "sinr" else self.power_map_dbm
+        label = "SINR (dB)" if kind == "sinr" else "received power (dBm)"
+        imshow_kwargs.setdefault("cmap", "viridis")
+        image = ax.imshow(values.T, origin="lower", extent=(0.0, room.width, 0.0, room.depth), **imshow_kwargs)
+        if colorbar:
+            ax.figure.colorbar(image, ax=ax, label=label, shrink=0.8)
+        outage = self.outage_map() if show_outage and kind == "sinr" else None
+        if outage is not None and outage.any():
+            x, y = self.centers[:, 0, 0], self.centers[0, :, 1]
+            ax.contour(x, y, outage.T.astype(float), levels=[0.5], colors="red", linewidths=0.8)
+        if show_obstacles:
+            body = self.scenario.robot.body_height
+            for x0, y0, x1, y1, z0, _ in self.boxes:
+                if x0 <= 0 and y0 <= 0 and x1 >= room.width and y1 >= room.depth:
+                    continue  # a floor slab over the whole room
+                ax.add_patch(
+                    Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, lw=0.8, ec="white", ls="-" if z0 < body else "--")
+                )
+        if show_transmitters:
+            ax.plot(*self.scenario.ap.position[:2], marker="*", ms=14, color="red", mec="black", ls="none", label="AP")
+            for interferer in self.scenario.interferers:
+                x, y = interferer.position[:2]
+                inside = 0 <= x <= room.width and 0 <= y <= room.depth
+                cx, cy = np.clip(x, 0, room.width), np.clip(y, 0, room.depth)
+                ax.plot(
+                    cx,
+                    cy,
+                    marker="X",
+                    ms=11,
+                    color="orange" if inside else "none",
+                    mec="orange",
+                    mew=2,
+                    ls="none",
+                    clip_on=False,
+                )
+                ax.annotate(interferer.name, (cx, cy), textcoords="offset points", xytext=(4, 4), color="orange", fontsize=8)
+        ax.set_xlim(0, room.width)
+        ax.set_ylim(0, room.depth)
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title(f"{self.scenario.name}: {'SINR map' if kind == 'sinr' else 'power distribution map'}")
+        return ax
+
+    def plot_maps(self, path: str | None = None, dpi: int = 120) -> Figure:
+        """
+        The paper's Fig. 4: the power distribution map and the SINR map side by side.
+
+        :param path: if given, save the figure there (PNG by extension)
+        :param dpi: resolution of the saved figure
+        :return: the figure
+        """
+        import matplotlib.pyplot as plt
+
+        figure, axes = plt.subplots(1, 2, figsize=(15, 4.8), layout="constrained")
+        self.plot(axes[0], kind="power")
+        self.plot(axes[1], kind="sinr")
+        if path is not None:
+            figure.savefig(path, dpi=dpi)
+        return figure
+
+    def __repr__(self) -> str:
+        return f"RadioMap(scenario={self.scenario.name!r}, shape={self.shape}, transmitters={list(self.transmitters)})"
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_radio_map(scenario: Scenario) -> RadioMap:
+    return RadioMap(scenario)

@@ -1,0 +1,535 @@
+"""Scenario files (SPEC 2.1): frozen dataclasses mirroring the YAML schema, loading and validation.
+
+A scenario is plain data: the room, the robots' body, the radio parameters, the AP, the external
+interferers, the obstacles (objects built from axis-aligned boxes, the paper's "Lego" bricks), the
+robots' missions and the mission constants. All dataclasses are frozen and hold tuples only, so a
+:class:`Scenario` is hashable and can key caches (:meth:`noma_radiomap.RadioMap.for_scenario`).
+
+Every field is validated on construction from a mapping (:meth:`Scenario.from_dict`); a bad field
+raises a ``ValueError`` naming its path (e.g. ``obstacles[3].boxes[1]``) and the offending value.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from noma_radiomap import geometry
+
+Vec2 = tuple[float, float]
+Vec3 = tuple[float, float, float]
+#: ``(x0, y0, x1, y1, z_bottom, z_top)`` in metres.
+Box = tuple[float, float, float, float, float, float]
+
+
+@dataclass(frozen=True)
+class Room:
+    """The room: ``x in [0, width]``, ``y in [0, depth]``, a grid of square cells of side ``resolution``."""
+
+    width: float
+    depth: float
+    resolution: float
+
+    @property
+    def nx(self) -> int:
+        """Number of cells along x."""
+        return round(self.width / self.resolution)
+
+    @property
+    def ny(self) -> int:
+        """Number of cells along y."""
+        return round(self.depth / self.resolution)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Grid shape ``(nx, ny)``; grids are indexed ``[ix, iy]``."""
+        return (self.nx, self.ny)
+
+    @property
+    def diagonal(self) -> float:
+        """Length of the room's diagonal in metres (the ``d_max`` of the inducing reward)."""
+        return math.hypot(self.width, self.depth)
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """The robots' body (shared by all robots): heights in metres, speed in m/s."""
+
+    body_height: float
+    antenna_height: float
+    v_max: float
+    arrival_radius: float
+
+
+@dataclass(frozen=True)
+class Radio:
+    """Radio parameters: path-loss constants (SPEC 2.3), noise, bandwidth and QoS (SPEC 2.6)."""
+
+    frequency_mhz: float
+    nlos_distance_coefficient: float
+    wall_loss_db: float
+    wall_loss_step_db: float
+    noise_dbm_per_hz: float
+    bandwidth_per_robot_hz: float
+    qos_rate_bps: float
+
+
+@dataclass(frozen=True)
+class AccessPoint:
+    """The serving access point: antenna position ``(x, y, z)`` and maximum transmit power."""
+
+    position: Vec3
+    max_power_dbm: float
+
+
+@dataclass(frozen=True)
+class Interferer:
+    """An external interferer (another AP), possibly outside the room or on another floor."""
+
+    name: str
+    position: Vec3
+    power_dbm: float
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One object made of one or more boxes; occlusion counts objects, not boxes (SPEC 2.2)."""
+
+    name: str
+    boxes: tuple[Box, ...]
+
+
+@dataclass(frozen=True)
+class RobotMission:
+    """One robot's mission: a start region ``(x0, y0, x1, y1)`` and its candidate destinations."""
+
+    start: tuple[float, float, float, float]
+    destinations: tuple[Vec2, ...]
+
+
+@dataclass(frozen=True)
+class Mission:
+    """Mission constants: MQI budget ``t_total``, outage penalty ``lambda``, step limit and step length (s)."""
+
+    t_total: float
+    outage_penalty: float
+    max_steps: int
+    time_step: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """
+    A complete scenario (SPEC 2.1). Build it with :func:`load_scenario` (a built-in name or a YAML
+    path) or :meth:`Scenario.from_dict` (validated); :meth:`to_dict` gives the YAML mapping back.
+
+    :param name: scenario name
+    :param room: the room and its grid
+    :param robot: the robots' body
+    :param radio: radio parameters
+    :param ap: the serving access point
+    :param interferers: external interferers
+    :param obstacles: obstacles (objects made of boxes)
+    :param robots: one mission per robot (``U = len(robots)``)
+    :param mission: mission constants
+    :param source: where the scenario was loaded from (not part of equality or the hash)
+    """
+
+    name: str
+    room: Room
+    robot: RobotSpec
+    radio: Radio
+    ap: AccessPoint
+    interferers: tuple[Interferer, ...]
+    obstacles: tuple[Obstacle, ...]
+    robots: tuple[RobotMission, ...]
+    mission: Mission
+    source: str | None = field(default=None, compare=False, hash=False, repr=False)
+
+    @property
+    def n_robots(self) -> int:
+        """Number of robots ``U``."""
+        return len(self.robots)
+
+    @property
+    def transmitter_names(self) -> tuple[str, ...]:
+        """``("ap", *interferer names)``: the keys of the radio map's per-transmitter dicts."""
+        return ("ap", *(i.name for i in self.interferers))
+
+    def boxes_array(self) -> tuple[np.ndarray, np.ndarray]:
+        """
+        All obstacle boxes as one array, with the index of the obstacle each belongs to.
+
+        :return: ``boxes`` of shape (n_boxes, 6) ``[x0, y0, x1, y1, z_bottom, z_top]`` and
+            ``owner`` of shape (n_boxes,) (non-decreasing obstacle indices)
+        """
+        rows = [box for obstacle in self.obstacles for box in obstacle.boxes]
+        owner = [k for k, obstacle in enumerate(self.obstacles) for _ in obstacle.boxes]
+        return np.asarray(rows, dtype=np.float64).reshape(-1, 6), np.asarray(owner, dtype=np.int64)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], source: str | None = None) -> Scenario:
+        """
+        Build and validate a scenario from a mapping with the keys of SPEC 2.1.
+
+        :param data: the scenario mapping (as loaded from YAML)
+        :param source: where it came from, used in error messages
+        :return: the validated scenario
+        :raises ValueError: naming the field path and the offending value
+        """
+        try:
+            return _parse_scenario(data, source)
+        except ValueError as error:
+            if source is not None:
+                raise ValueError(f"{source}: {error}") from None
+            raise
+
+    def to_dict(self) -> dict[str, Any]:
+        """
+        The scenario as a plain mapping (lists, floats), such that ``Scenario.from_dict(s.to_dict()) == s``.
+
+        :return: the YAML-ready mapping
+        """
+        return {
+            "name": self.name,
+            "room": {"width": self.room.width, "depth": self.room.depth, "resolution": self.room.resolution},
+            "robot": _fields(self.robot),
+            "radio": _fields(self.radio),
+            "ap": {"position": list(self.ap.position), "max_power_dbm": self.ap.max_power_dbm},
+            "interferers": [
+                {"name": i.name, "position": list(i.position), "power_dbm": i.power_dbm} for i in self.interferers
+            ],
+            "obstacles": [{"name": o.name, "boxes": [list(b) for b in o.boxes]} for o in self.obstacles],
+            "robots": [{"start": list(r.start), "destinations": [list(d) for d in r.destinations]} for r in self.robots],
+            "mission": _fields(self.mission),
+        }
+
+    def with_resolution(self, resolution: float) -> Scenario:
+        """
+        The same scenario on another grid (validated again: destinations must stay free and reachable).
+
+        :param resolution: new cell size in metres
+        :return: a new scenario
+        """
+        data = self.to_dict()
+        data["room"]["resolution"] = resolution
+        return Scenario.from_dict(data, self.source)
+
+
+def _fields(obj: Any) -> dict[str, Any]:
+    return {name: getattr(obj, name) for name in obj.__dataclass_fields__}
+
+
+# --------------------------------------------------------------------------------------------------
+# Validation helpers. Each names the field path and the offending value in its error message.
+# --------------------------------------------------------------------------------------------------
+
+
+def _describe(value: Any) -> str:
+    return f"{value!r} ({type(value).__name__})"
+
+
+def _mapping(value: Any, path: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> Mapping[str, Any]:
+    where = path or "scenario"
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{where}: expected a mapping, got {_describe(value)}")
+    missing = [key for key in required if key not in value]
+    if missing:
+        prefix = f"{path}." if path else ""
+        raise ValueError(f"{prefix}{missing[0]}: missing key (in {where}, which has keys {sorted(map(str, value))})")
+    unknown = [key for key in value if key not in required and key not in optional]
+    if unknown:
+        prefix = f"{path}." if path else ""
+        raise ValueError(f"{prefix}{unknown[0]}: unknown key (known keys of {where}: {sorted(required + optional)})")
+    return value
+
+
+def _number(value: Any, path: str, *, positive: bool = False, nonnegative: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{path}: expected a number, got {_describe(value)}")
+    if not math.isfinite(value):
+        raise ValueError(f"{path}: expected a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise ValueError(f"{path}: must be > 0, got {value!r}")
+    if nonnegative and value < 0:
+        raise ValueError(f"{path}: must be >= 0, got {value!r}")
+    return float(value)
+
+
+def _integer(value: Any, path: str, *, positive: bool = False) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        else:
+            raise ValueError(f"{path}: expected an integer, got {_describe(value)}")
+    if positive and value <= 0:
+        raise ValueError(f"{path}: must be > 0, got {value!r}")
+    return int(value)
+
+
+def _string(value: Any, path: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise ValueError(f"{path}: expected a non-empty string, got {_describe(value)}")
+    return value
+
+
+def _list(value: Any, path: str, *, non_empty: bool = False) -> list[Any]:
+    if not isinstance(value, (list, tuple)):
+        raise ValueError(f"{path}: expected a list, got {_describe(value)}")
+    if non_empty and len(value) == 0:
+        raise ValueError(f"{path}: expected a non-empty list, got {value!r}")
+    return list(value)
+
+
+def _vector(value: Any, path: str, length: int) -> tuple[float, ...]:
+    items = _list(value, path)
+    if len(items) != length:
+        raise ValueError(f"{path}: expected a list of {length} numbers, got {value!r}")
+    return tuple(_number(item, f"{path}[{k}]") for k, item in enumerate(items))
+
+
+def _in_room(point: tuple[float, ...], room: Room, path: str) -> None:
+    x, y = point[0], point[1]
+    if not (0.0 <= x <= room.width and 0.0 <= y <= room.depth):
+        raise ValueError(f"{path}: {list(point)} is outside the room [0, {room.width}] x [0, {room.depth}]")
+
+
+# --------------------------------------------------------------------------------------------------
+# Parsing
+# --------------------------------------------------------------------------------------------------
+
+_TOP_KEYS = ("name", "room", "robot", "radio", "ap", "robots", "mission")
+_OPTIONAL_TOP_KEYS = ("interferers", "obstacles")
+
+
+def _parse_room(data: Any) -> Room:
+    d = _mapping(data, "room", ("width", "depth", "resolution"))
+    room = Room(
+        width=_number(d["width"], "room.width", positive=True),
+        depth=_number(d["depth"], "room.depth", positive=True),
+        resolution=_number(d["resolution"], "room.resolution", positive=True),
+    )
+    for side in ("width", "depth"):
+        cells = getattr(room, side) / room.resolution
+        if cells < 1 or abs(cells - round(cells)) > 1e-6 * max(1.0, cells):
+            raise ValueError(
+                f"room.resolution: {room.resolution!r} must divide room.{side} = {getattr(room, side)!r} "
+                "into a whole number (>= 1) of cells"
+            )
+    return room
+
+
+def _parse_simple(cls: type, data: Any, path: str, positive: tuple[str, ...], nonnegative: tuple[str, ...] = ()) -> Any:
+    names = tuple(cls.__dataclass_fields__)
+    d = _mapping(data, path, names)
+    return cls(
+        **{
+            name: _number(d[name], f"{path}.{name}", positive=name in positive, nonnegative=name in nonnegative)
+            for name in names
+        }
+    )
+
+
+def _parse_mission(data: Any) -> Mission:
+    d = _mapping(data, "mission", ("t_total", "outage_penalty", "max_steps", "time_step"))
+    return Mission(
+        t_total=_number(d["t_total"], "mission.t_total", positive=True),
+        outage_penalty=_number(d["outage_penalty"], "mission.outage_penalty", nonnegative=True),
+        max_steps=_integer(d["max_steps"], "mission.max_steps", positive=True),
+        time_step=_number(d["time_step"], "mission.time_step", positive=True),
+    )
+
+
+def _parse_ap(data: Any, room: Room) -> AccessPoint:
+    d = _mapping(data, "ap", ("position", "max_power_dbm"))
+    position = _vector(d["position"], "ap.position", 3)
+    _in_room(position, room, "ap.position")
+    if position[2] <= 0:
+        raise ValueError(f"ap.position: the antenna height z must be > 0, got {list(position)}")
+    return AccessPoint(position=position, max_power_dbm=_number(d["max_power_dbm"], "ap.max_power_dbm"))  # type: ignore[arg-type]
+
+
+def _parse_interferers(data: Any) -> tuple[Interferer, ...]:
+    result = []
+    names: set[str] = set()
+    for k, item in enumerate(_list(data, "interferers")):
+        path = f"interferers[{k}]"
+        d = _mapping(item, path, ("name", "position", "power_dbm"))
+        name = _string(d["name"], f"{path}.name")
+        if name == "ap" or name in names:
+            raise ValueError(f'{path}.name: {name!r} is not unique ("ap" and other interferers\' names are taken)')
+        names.add(name)
+        position = _vector(d["position"], f"{path}.position", 3)
+        result.append(Interferer(name=name, position=position, power_dbm=_number(d["power_dbm"], f"{path}.power_dbm")))  # type: ignore[arg-type]
+    return tuple(result)
+
+
+def _parse_box(value: Any, path: str, room: Room) -> Box:
+    box = _vector(value, path, 6)
+    x0, y0, x1, y1, z0, z1 = box
+    if x1 <= x0 or y1 <= y0:
+        raise ValueError(f"{path}: non-positive size (need x0 < x1 and y0 < y1), got {list(box)}")
+    if z1 <= z0:
+        raise ValueError(f"{path}: z_top must be > z_bottom, got {list(box)}")
+    if z0 < 0:
+        raise ValueError(f"{path}: z_bottom must be >= 0, got {list(box)}")
+    eps = 1e-9
+    if x0 < -eps or y0 < -eps or x1 > room.width + eps or y1 > room.depth + eps:
+        raise ValueError(f"{path}: box {list(box)} is outside the room [0, {room.width}] x [0, {room.depth}]")
+    return box  # type: ignore[return-value]
+
+
+def _parse_obstacles(data: Any, room: Room) -> tuple[Obstacle, ...]:
+    result = []
+    names: set[str] = set()
+    for k, item in enumerate(_list(data, "obstacles")):
+        path = f"obstacles[{k}]"
+        d = _mapping(item, path, ("name", "boxes"))
+        name = _string(d["name"], f"{path}.name")
+        if name in names:
+            raise ValueError(f"{path}.name: {name!r} is not unique")
+        names.add(name)
+        boxes = tuple(
+            _parse_box(b, f"{path}.boxes[{j}]", room) for j, b in enumerate(_list(d["boxes"], f"{path}.boxes", non_empty=True))
+        )
+        result.append(Obstacle(name=name, boxes=boxes))
+    return tuple(result)
+
+
+def _parse_robots(data: Any, room: Room) -> tuple[RobotMission, ...]:
+    result = []
+    for u, item in enumerate(_list(data, "robots", non_empty=True)):
+        path = f"robots[{u}]"
+        d = _mapping(item, path, ("start", "destinations"))
+        start = _vector(d["start"], f"{path}.start", 4)
+        x0, y0, x1, y1 = start
+        if x1 < x0 or y1 < y0:
+            raise ValueError(f"{path}.start: need x0 <= x1 and y0 <= y1, got {list(start)}")
+        _in_room((x0, y0), room, f"{path}.start")
+        _in_room((x1, y1), room, f"{path}.start")
+        destinations = tuple(
+            _vector(p, f"{path}.destinations[{j}]", 2)
+            for j, p in enumerate(_list(d["destinations"], f"{path}.destinations", non_empty=True))
+        )
+        for j, p in enumerate(destinations):
+            _in_room(p, room, f"{path}.destinations[{j}]")
+        result.append(RobotMission(start=start, destinations=destinations))  # type: ignore[arg-type]
+    return tuple(result)
+
+
+def _check_layout(scenario: Scenario) -> None:
+    """Checks that need the grid: AP not inside an obstacle, start regions free, destinations reachable."""
+    room = scenario.room
+    ax, ay, az = scenario.ap.position
+    boxes, owner = scenario.boxes_array()
+    # The AP must be outside every box, as given and as snapped to the grid (occlusion uses the
+    # snapped boxes: an AP inside one would see every ray cross it).
+    snapped = geometry.snapped_boxes_m(boxes, room.resolution, room.shape)
+    index_in_obstacle = np.arange(len(owner)) - np.searchsorted(owner, owner)
+    for raw, grid, k, j in zip(boxes, snapped, owner, index_in_obstacle, strict=True):
+        for x0, y0, x1, y1, z0, z1 in (raw, grid):
+            if x0 < ax < x1 and y0 < ay < y1 and z0 < az < z1:
+                raise ValueError(
+                    f"ap.position: {list(scenario.ap.position)} is inside obstacles[{k}].boxes[{j}] "
+                    f"({scenario.obstacles[k].name!r}: {list(scenario.obstacles[k].boxes[j])}, "
+                    f"snapped to the grid: {grid.tolist()})"
+                )
+    blocked = geometry.occupancy_grid(boxes, room.width, room.depth, room.resolution, scenario.robot.body_height)
+    components = geometry.free_components(blocked)
+    for u, robot in enumerate(scenario.robots):
+        cells = geometry.region_cells(robot.start, room.resolution, blocked.shape)
+        free = cells[~blocked[cells[:, 0], cells[:, 1]]]
+        if len(free) == 0:
+            raise ValueError(f"robots[{u}].start: region {list(robot.start)} has no free cell")
+        start_labels = np.unique(components[free[:, 0], free[:, 1]])
+        for j, destination in enumerate(robot.destinations):
+            path = f"robots[{u}].destinations[{j}]"
+            ix, iy = geometry.point_cell(np.asarray(destination), room.resolution, blocked.shape)
+            if blocked[ix, iy]:
+                raise ValueError(f"{path}: {list(destination)} lies in a blocked cell ({int(ix)}, {int(iy)})")
+            if len(start_labels) > 1 or components[ix, iy] != start_labels[0]:
+                raise ValueError(
+                    f"{path}: {list(destination)} is unreachable from robots[{u}].start region {list(robot.start)}"
+                )
+
+
+def _parse_scenario(data: Any, source: str | None) -> Scenario:
+    d = _mapping(data, "", _TOP_KEYS, _OPTIONAL_TOP_KEYS)
+    room = _parse_room(d["room"])
+    scenario = Scenario(
+        name=_string(d["name"], "name"),
+        room=room,
+        robot=_parse_simple(
+            RobotSpec, d["robot"], "robot", positive=("body_height", "antenna_height", "v_max", "arrival_radius")
+        ),
+        radio=_parse_simple(
+            Radio,
+            d["radio"],
+            "radio",
+            positive=("frequency_mhz", "nlos_distance_coefficient", "bandwidth_per_robot_hz", "qos_rate_bps"),
+            nonnegative=("wall_loss_db", "wall_loss_step_db"),
+        ),
+        ap=_parse_ap(d["ap"], room),
+        interferers=_parse_interferers(d.get("interferers", [])),
+        obstacles=_parse_obstacles(d.get("obstacles", []), room),
+        robots=_parse_robots(d["robots"], room),
+        mission=_parse_mission(d["mission"]),
+        source=source,
+    )
+    _check_layout(scenario)
+    return scenario
+
+
+# --------------------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------------------
+
+
+def list_scenarios() -> list[str]:
+    """
+    Names of the built-in scenarios (the YAML files shipped in ``noma_radiomap/scenarios``).
+
+    :return: sorted names, e.g. ``["mall", "small"]``
+    """
+    folder = resources.files("noma_radiomap") / "scenarios"
+    return sorted(entry.name[: -len(".yaml")] for entry in folder.iterdir() if entry.name.endswith(".yaml"))
+
+
+def _read_yaml(text: str, source: str) -> Any:
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None) or getattr(error, "context_mark", None)
+        where = f"{source}, line {mark.line + 1}, column {mark.column + 1}" if mark is not None else source
+        problem = getattr(error, "problem", None) or str(error)
+        raise ValueError(f"{where}: malformed YAML: {problem}") from None
+
+
+def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
+    """
+    Load a scenario: a built-in name (see :func:`list_scenarios`) or the path of a YAML file.
+
+    :param name_or_path: e.g. ``"mall"`` or ``"my_scenarios/office.yaml"``
+    :return: the validated scenario
+    :raises ValueError: unknown name, malformed YAML (file and line) or an invalid field (its path and value)
+    """
+    text = os.fspath(name_or_path)
+    builtins = list_scenarios()
+    if text in builtins and not isinstance(name_or_path, Path):
+        resource = resources.files("noma_radiomap") / "scenarios" / f"{text}.yaml"
+        source = f"{text}.yaml"
+        content = resource.read_text(encoding="utf-8")
+    elif os.path.isfile(text):
+        source = text
+        content = Path(text).read_text(encoding="utf-8")
+    else:
+        raise ValueError(f"scenario {text!r}: unknown built-in name and no such file (built-in scenarios: {builtins})")
+    return Scenario.from_dict(_read_yaml(content, source), source=source)
