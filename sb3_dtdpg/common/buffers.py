@@ -1,0 +1,118 @@
+"""Replay buffer that keeps the reward components of every transition, so rewards can be relabelled."""
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.buffers import ReplayBuffer
+
+#: Reward components of ``noma_radiomap`` (SPEC 2.9), in the order they are stored.
+REWARD_COMPONENTS: tuple[str, ...] = ("time", "inducing", "qos", "arrival", "success")
+
+
+class RewardComponentsReplayBuffer(ReplayBuffer):
+    """
+    Replay buffer that also stores ``info["reward_components"]`` (a dict of floats) for every transition.
+
+    A phased env's reward is a weighted sum of these components (``env.reward_weights(phase)``), so the reward
+    of every stored transition can be recomputed for another reward phase with :meth:`relabel`: the
+    ``"relabel"`` replay handling of :class:`sb3_dtdpg.common.callbacks.CurriculumTransferCallback`.
+    The stored rewards are the env's raw rewards (SB3 stores un-normalized rewards under ``VecNormalize``), and
+    so are the relabelled ones.
+
+    :param buffer_size: Max number of element in the buffer
+    :param observation_space: Observation space
+    :param action_space: Action space
+    :param device: PyTorch device
+    :param n_envs: Number of parallel environments
+    :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer (see SB3's ``ReplayBuffer``)
+    :param handle_timeout_termination: Handle timeout termination (due to timelimit) separately and treat the task
+        as infinite horizon task (see SB3's ``ReplayBuffer``)
+    :param component_keys: Names of the reward components, the keys every ``info["reward_components"]`` must have
+    """
+
+    reward_components: np.ndarray
+
+    def __init__(
+        self,
+        buffer_size: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        device: th.device | str = "auto",
+        n_envs: int = 1,
+        optimize_memory_usage: bool = False,
+        handle_timeout_termination: bool = True,
+        component_keys: Sequence[str] = REWARD_COMPONENTS,
+    ):
+        super().__init__(
+            buffer_size,
+            observation_space,
+            action_space,
+            device=device,
+            n_envs=n_envs,
+            optimize_memory_usage=optimize_memory_usage,
+            handle_timeout_termination=handle_timeout_termination,
+        )
+        component_keys = tuple(component_keys)
+        if not component_keys or len(set(component_keys)) != len(component_keys):
+            raise ValueError(f"component_keys must be non-empty and unique, got {component_keys!r}")
+        self.component_keys = component_keys
+        # float64: relabelled rewards are sums of several components, computed without float32 round-off
+        self.reward_components = np.zeros((self.buffer_size, self.n_envs, len(component_keys)), dtype=np.float64)
+
+    def _components_from_infos(self, infos: list[dict[str, Any]]) -> np.ndarray:
+        if len(infos) != self.n_envs:
+            raise ValueError(f"expected {self.n_envs} infos (one per env), got {len(infos)}")
+        components = np.empty((self.n_envs, len(self.component_keys)), dtype=np.float64)
+        for env_idx, info in enumerate(infos):
+            values = info.get("reward_components")
+            if not isinstance(values, Mapping):
+                raise ValueError(
+                    f"{type(self).__name__} needs info['reward_components'] (a dict with keys {list(self.component_keys)}) "
+                    f"from every step; env {env_idx} gave {values!r}"
+                )
+            for k, key in enumerate(self.component_keys):
+                if key not in values:
+                    raise ValueError(
+                        f"info['reward_components'] of env {env_idx} has no key {key!r} (it has {sorted(values)}, "
+                        f"the buffer stores {list(self.component_keys)})"
+                    )
+                components[env_idx, k] = values[key]
+        return components
+
+    def add(
+        self,
+        obs: np.ndarray,
+        next_obs: np.ndarray,
+        action: np.ndarray,
+        reward: np.ndarray,
+        done: np.ndarray,
+        infos: list[dict[str, Any]],
+    ) -> None:
+        # Read the components first: a bad info must not leave a half-written transition behind
+        components = self._components_from_infos(infos)
+        self.reward_components[self.pos] = components
+        super().add(obs, next_obs, action, reward, done, infos)
+
+    def relabel(self, weights: Mapping[str, float]) -> None:
+        """
+        Recompute every stored reward as the weighted sum of its stored reward components.
+
+        :param weights: Weight per component (e.g. ``env.reward_weights(phase)``); components not given weigh 0.
+        """
+        unknown = sorted(set(weights) - set(self.component_keys))
+        if unknown:
+            raise ValueError(
+                f"weights has component(s) {unknown} that the buffer does not store ({list(self.component_keys)})"
+            )
+        w = np.array([float(weights.get(key, 0.0)) for key in self.component_keys], dtype=np.float64)
+        if not np.all(np.isfinite(w)):
+            raise ValueError(f"weights must be finite, got {dict(weights)!r}")
+        # Unused slots hold zero components and get a zero reward: harmless, they are never sampled
+        self.rewards[...] = self.reward_components @ w
+
+    def clear(self) -> None:
+        """Empty the buffer (the storage is kept and overwritten by the next transitions)."""
+        self.reset()

@@ -1,0 +1,375 @@
+"""Callbacks of DT-DPG: the curriculum transfer between reward phases and the mission logger."""
+
+import os
+import re
+import uuid
+import warnings
+from collections import deque
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.noise import VectorizedActionNoise
+
+from sb3_dtdpg.common.noise import LinearDecayOUNoise, noise_sigma, rearm_noise
+from sb3_dtdpg.common.phases import Phase, parse_phases
+
+
+class CurriculumTransferCallback(BaseCallback):
+    """
+    Curriculum transfer of DT-DPG (Algorithm 1 of Zhong et al., "Path Design and Resource Management for NOMA
+    enhanced Indoor Intelligent Robots"): train through several phases in order, each with its own env reward
+    phase, budget and exploration-noise schedule, carrying the networks from one phase to the next.
+
+    A phase ends when its budget (episodes or env steps) is spent, or early when its success rate
+    (``info["is_success"]`` at episode end) over its last ``success_window`` episodes reaches
+    ``success_threshold``. At the transfer:
+
+    1. the finished phase's model (theta_X of Algorithm 1) is saved atomically to
+       ``<save_path>/phase_<k>_<name>.zip`` (a temporary file in the same folder, then ``os.replace``);
+    2. the networks carry over unchanged, or, with ``reinitialize_networks=True`` (ablation), are re-created
+       from scratch with fresh optimizers: ``model._setup_model()`` is re-run with the model's seed withheld so
+       that it does not re-seed the global RNGs (which would replay their streams); it keeps the replay buffer
+       and rebuilds the policy, its optimizers and the algorithm's aliases (``actor``, ``critic_target``, ...);
+    3. the env switches reward phase (``env_method("set_reward_phase", name)``), from the next step on;
+    4. the action noise re-arms with the new phase's schedule (:func:`sb3_dtdpg.common.noise.rearm_noise`);
+       the episode that just ended does not count in the new schedule;
+    5. the replay buffer is kept, cleared, or relabelled for the new phase (``Phase.replay_handling``).
+       Relabelling waits until SB3 has stored the transfer step's transitions and happens before the next
+       gradient step (at the end of the rollout, or at the next step if the rollout goes on). Clearing happens
+       at once, so the transfer step's transitions (one per env) are the first of the cleared buffer: the
+       gradient step after the rollout needs data; a buffer that stores reward components relabels them.
+
+    Episodes are counted from ``dones`` (terminations and truncations) over all envs of a vectorized env, so
+    with several envs a phase may end with a few more episodes than its budget. When the last phase has a
+    budget, training stops once it is spent; otherwise the last phase lasts until ``learn()`` ends, and its
+    model is saved (``phase_<k>_<name>.zip``) at the end of every ``learn()`` call.
+
+    The curriculum state lives in ``model.curriculum_state`` (a plain dict: phase index, episodes and steps done
+    in the phase, recent successes, the history of phases), so ``model.save`` saves it with the action noise and
+    its schedule: ``Model.load(path, env)`` then ``learn(..., callback=CurriculumTransferCallback(same phases))``
+    resumes in the same phase, and repeated ``learn()`` calls continue the curriculum. Loading a
+    ``phase_<k>_<name>.zip`` checkpoint and training goes on with phase k + 1.
+
+    Logged: ``curriculum/phase`` (index), ``curriculum/noise_sigma``, ``curriculum/episodes_in_phase`` at every
+    step (written at SB3's log dumps); a line per transfer with ``verbose >= 1``.
+
+    Works with any SB3 off-policy algorithm (DDPG, TD3, ...). When a phase has a noise ``sigma`` and the model has
+    no action noise, a :class:`sb3_dtdpg.common.noise.LinearDecayOUNoise` is created for it.
+
+    :param phases: The phases in training order (:class:`sb3_dtdpg.common.phases.Phase` or dicts of their fields).
+    :param save_path: Folder for the per-phase checkpoints (None: no checkpoints).
+    :param reinitialize_networks: Ablation: re-initialise the networks at each transfer instead of carrying them over.
+    :param verbose: Verbosity level: 0 no output, 1 a line per transfer.
+    """
+
+    def __init__(
+        self,
+        phases: Sequence[Phase | Mapping[str, Any]],
+        save_path: str | os.PathLike[str] | None = None,
+        reinitialize_networks: bool = False,
+        verbose: int = 0,
+    ):
+        super().__init__(verbose=verbose)
+        self.phases = parse_phases(phases)
+        self.save_path = None if save_path is None else os.fspath(save_path)
+        self.reinitialize_networks = reinitialize_networks
+        self._pending_replay: Phase | None = None
+        self._stop = False
+
+    # ------------------------------------------------------------------ state
+    @property
+    def state(self) -> dict[str, Any]:
+        """The curriculum state, ``model.curriculum_state``."""
+        return self.model.curriculum_state  # type: ignore[attr-defined]
+
+    @property
+    def phase_index(self) -> int:
+        """Index of the current phase."""
+        return self.state["phase_index"]
+
+    @property
+    def phase(self) -> Phase:
+        """The current phase."""
+        return self.phases[self.phase_index]
+
+    def checkpoint_path(self, index: int) -> str | None:
+        """
+        :param index: Phase index
+        :return: Where the model at the end of that phase is saved (None without ``save_path``).
+        """
+        if self.save_path is None:
+            return None
+        name = re.sub(r"[^A-Za-z0-9_.-]", "_", self.phases[index].name)
+        return os.path.join(self.save_path, f"phase_{index}_{name}.zip")
+
+    def _new_history_entry(self, index: int) -> dict[str, Any]:
+        return {
+            "phase": self.phases[index].name,
+            "start_timestep": int(self.num_timesteps),
+            "end_timestep": None,
+            "episodes": None,
+            "timesteps": None,
+            "reason": None,
+        }
+
+    # ------------------------------------------------------------------ SB3 hooks
+    def _on_training_start(self) -> None:
+        self._check_setup()
+        self._pending_replay = None
+        self._stop = False
+        state = getattr(self.model, "curriculum_state", None)
+        if not state:
+            self.model.curriculum_state = {  # type: ignore[attr-defined]
+                "phase_names": [phase.name for phase in self.phases],
+                "phase_index": 0,
+                "episodes_in_phase": 0,
+                "timesteps_in_phase": 0,
+                "recent_successes": [],
+                "finished": False,
+                "history": [self._new_history_entry(0)],
+            }
+            self._set_env_phase(self.phases[0])
+            self._arm_noise(self.phases[0])
+        else:
+            saved = list(state.get("phase_names", []))
+            if saved != [phase.name for phase in self.phases]:
+                raise ValueError(
+                    f"model.curriculum_state was saved with the phases {saved}, but the callback has "
+                    f"{[phase.name for phase in self.phases]}: resume with the same phases"
+                )
+            if not state["finished"]:
+                # Resume mid-phase: the noise (saved with the model) keeps its schedule position
+                self._set_env_phase(self.phase)
+                if self.model.action_noise is None:
+                    self._arm_noise(self.phase)
+            elif self.phase_index + 1 < len(self.phases):
+                # Trained from a phase checkpoint: the transfer it marks has not been applied yet
+                self._enter_phase(self.phase_index + 1, defer_replay=False)
+            else:
+                warnings.warn(f"The curriculum is over (its last phase {self.phase.name!r} is finished): training stops")
+                self._stop = True
+        self._record()
+
+    def _on_step(self) -> bool:
+        self._apply_pending_replay()
+        if self._stop:
+            return False
+        state = self.state
+        phase = self.phase
+        state["timesteps_in_phase"] += self.training_env.num_envs
+        for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+            if not done:
+                continue
+            state["episodes_in_phase"] += 1
+            if "is_success" in info:
+                state["recent_successes"] = [*state["recent_successes"], bool(info["is_success"])][-phase.success_window :]
+            elif phase.success_threshold is not None:
+                raise ValueError(
+                    f"phase {phase.name!r} has success_threshold={phase.success_threshold}, which needs "
+                    "info['is_success'] at the end of every episode; the env gave none"
+                )
+        reason = self._end_reason(phase, state)
+        continue_training = True
+        if reason is not None:
+            continue_training = self._transfer(reason)
+        self._record()
+        return continue_training
+
+    def _on_rollout_end(self) -> None:
+        self._apply_pending_replay()
+
+    def _on_training_end(self) -> None:
+        self._apply_pending_replay()
+        if self.phase_index == len(self.phases) - 1 and not self.state["finished"]:
+            self._save_checkpoint(self.phase_index)
+
+    # ------------------------------------------------------------------ transfer
+    def _end_reason(self, phase: Phase, state: dict[str, Any]) -> str | None:
+        if phase.n_episodes is not None and state["episodes_in_phase"] >= phase.n_episodes:
+            return "episode budget"
+        if phase.n_timesteps is not None and state["timesteps_in_phase"] >= phase.n_timesteps:
+            return "timestep budget"
+        successes = state["recent_successes"]
+        if (
+            phase.success_threshold is not None
+            and len(successes) >= phase.success_window
+            and np.mean(successes) >= phase.success_threshold
+        ):
+            return "success rate"
+        return None
+
+    def _transfer(self, reason: str) -> bool:
+        state, index = self.state, self.phase_index
+        state["finished"] = True
+        state["history"][-1].update(
+            end_timestep=int(self.num_timesteps),
+            episodes=state["episodes_in_phase"],
+            timesteps=state["timesteps_in_phase"],
+            reason=reason,
+        )
+        path = self._save_checkpoint(index)
+        if self.verbose >= 1:
+            print(
+                f"Curriculum: phase {index} {self.phase.name!r} finished ({reason}) after {state['episodes_in_phase']} "
+                f"episodes, {state['timesteps_in_phase']} steps, at step {self.num_timesteps}"
+                + (f"; saved to {path}" if path else "")
+            )
+        if index + 1 == len(self.phases):
+            return False
+        self._enter_phase(index + 1, defer_replay=True)
+        return True
+
+    def _enter_phase(self, index: int, defer_replay: bool) -> None:
+        phase = self.phases[index]
+        self.state.update(phase_index=index, episodes_in_phase=0, timesteps_in_phase=0, recent_successes=[], finished=False)
+        self.state["history"].append(self._new_history_entry(index))
+        if self.reinitialize_networks:
+            self._reinitialize_policy()
+        self._set_env_phase(phase)
+        self._arm_noise(phase)
+        if phase.replay_handling == "clear":
+            # Cleared now, not after SB3 stores this step's transitions: the gradient step that follows the
+            # rollout needs a non-empty buffer. Those transitions (one per env) are relabelled below if possible.
+            self.model.replay_buffer.reset()  # type: ignore[attr-defined]
+        if phase.replay_handling != "keep":
+            self._pending_replay = phase
+            if not defer_replay:
+                self._apply_pending_replay()
+        if self.verbose >= 1:
+            print(
+                f"Curriculum: entering phase {index} {phase.name!r} (reward phase {phase.reward_phase!r}, "
+                f"noise sigma {phase.sigma}, replay buffer: {phase.replay_handling}"
+                + (", networks re-initialised)" if self.reinitialize_networks else ", networks carried over)")
+            )
+
+    def _reinitialize_policy(self) -> None:
+        model = self.model
+        seed = model.seed
+        model.seed = None  # _setup_model() calls set_random_seed(self.seed), a no-op for None
+        try:
+            model._setup_model()
+        finally:
+            model.seed = seed
+        # We may be in the middle of a rollout, which SB3 collects in eval mode (batch norm with a batch of one)
+        model.policy.set_training_mode(False)
+
+    def _apply_pending_replay(self) -> None:
+        phase, self._pending_replay = self._pending_replay, None
+        if phase is None:
+            return
+        buffer = self.model.replay_buffer  # type: ignore[attr-defined]
+        if hasattr(buffer, "relabel") and phase.reward_phase is not None and self.training_env.has_attr("reward_weights"):
+            weights = self.training_env.env_method("reward_weights", phase.reward_phase, indices=[0])[0]
+            buffer.relabel(weights)
+
+    def _set_env_phase(self, phase: Phase) -> None:
+        if phase.reward_phase is not None:
+            self.training_env.env_method("set_reward_phase", phase.reward_phase)
+
+    def _arm_noise(self, phase: Phase) -> None:
+        schedule = phase.noise_schedule()
+        if schedule is None:
+            return
+        sigma, final_sigma, decay_episodes = schedule
+        if self.model.action_noise is None:
+            n_actions = int(np.prod(self.model.action_space.shape))
+            noise: Any = LinearDecayOUNoise(np.zeros(n_actions), sigma, final_sigma, decay_episodes)
+            if self.training_env.num_envs > 1:
+                noise = VectorizedActionNoise(noise, self.training_env.num_envs)
+            self.model.action_noise = noise
+        else:
+            rearm_noise(self.model.action_noise, sigma, final_sigma, decay_episodes)
+
+    def _save_checkpoint(self, index: int) -> str | None:
+        path = self.checkpoint_path(index)
+        if path is None:
+            return None
+        os.makedirs(self.save_path, exist_ok=True)  # type: ignore[arg-type]
+        # Same folder as the target, so os.replace is an atomic rename: a reader never sees a partial file
+        tmp_path = os.path.join(self.save_path, f".{os.path.basename(path)}.{uuid.uuid4().hex}.zip")  # type: ignore[arg-type]
+        try:
+            self.model.save(tmp_path)
+            os.replace(tmp_path, path)
+        except BaseException:
+            if os.path.exists(tmp_path):
+                os.remove(tmp_path)
+            raise
+        return path
+
+    def _record(self) -> None:
+        self.logger.record("curriculum/phase", self.phase_index)
+        self.logger.record("curriculum/episodes_in_phase", self.state["episodes_in_phase"])
+        if self.model.action_noise is not None:
+            self.logger.record("curriculum/noise_sigma", noise_sigma(self.model.action_noise))
+
+    # ------------------------------------------------------------------ checks
+    def _check_setup(self) -> None:
+        env = self.training_env
+        reward_phases = sorted({phase.reward_phase for phase in self.phases if phase.reward_phase is not None})
+        if reward_phases:
+            if not env.has_attr("set_reward_phase"):
+                raise ValueError(
+                    f"the phases use the env reward phases {reward_phases}, but the env has no set_reward_phase(); "
+                    "for an env without reward phases give the phases reward_phase=None (e.g. single_phase())"
+                )
+            if env.has_attr("REWARD_PHASES"):
+                known = list(env.get_attr("REWARD_PHASES", indices=[0])[0])
+                unknown = [name for name in reward_phases if name not in known]
+                if unknown:
+                    raise ValueError(f"reward_phase {unknown[0]!r} of the phases is not a reward phase of the env {known}")
+        for phase in self.phases[1:]:
+            if phase.replay_handling != "relabel":
+                continue
+            if phase.reward_phase is None:
+                raise ValueError(f"phase {phase.name!r}: replay_handling='relabel' needs a reward_phase, got None")
+            if not hasattr(self.model.replay_buffer, "relabel"):  # type: ignore[attr-defined]
+                raise ValueError(
+                    f"phase {phase.name!r} has replay_handling='relabel', which needs a replay buffer that stores reward "
+                    f"components (replay_buffer_class=RewardComponentsReplayBuffer), got "
+                    f"{type(self.model.replay_buffer).__name__}"  # type: ignore[attr-defined]
+                )
+            if not env.has_attr("reward_weights"):
+                raise ValueError(f"phase {phase.name!r} has replay_handling='relabel', which needs env.reward_weights()")
+
+
+class MissionLoggerCallback(BaseCallback):
+    """
+    Log the mission figures of finished episodes from the env's ``info`` under ``mission/``:
+    ``success_rate`` (over the last ``stats_window_size`` episodes, from ``is_success``), and the means over the
+    episodes since the last log dump of ``mqi``, ``outage_steps`` (summed over robots) and ``mission_time``
+    (the largest over robots: steps until the last robot arrived, ``max_steps`` if one never did).
+    Keys absent from an env's infos are skipped.
+
+    :param stats_window_size: Window of the success rate (None: the model's ``stats_window_size``).
+    :param verbose: Verbosity level.
+    """
+
+    def __init__(self, stats_window_size: int | None = None, verbose: int = 0):
+        super().__init__(verbose=verbose)
+        if stats_window_size is not None and (isinstance(stats_window_size, bool) or stats_window_size < 1):
+            raise ValueError(f"stats_window_size must be a positive integer or None, got {stats_window_size!r}")
+        self.stats_window_size = stats_window_size
+        self.successes: deque[bool] = deque(maxlen=stats_window_size or 100)
+
+    def _init_callback(self) -> None:
+        window = self.stats_window_size or getattr(self.model, "_stats_window_size", 100)
+        if self.successes.maxlen != window:
+            self.successes = deque(self.successes, maxlen=window)
+
+    def _on_step(self) -> bool:
+        for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+            if not done:
+                continue
+            if "is_success" in info:
+                self.successes.append(bool(info["is_success"]))
+                self.logger.record("mission/success_rate", float(np.mean(self.successes)))
+            if "mqi" in info:
+                self.logger.record_mean("mission/mqi", float(info["mqi"]))
+            if "outage_steps" in info:
+                self.logger.record_mean("mission/outage_steps", float(np.sum(info["outage_steps"])))
+            if "mission_time" in info:
+                # Per robot (SPEC 2.9): the squad's mission time is the last arrival.
+                self.logger.record_mean("mission/mission_time", float(np.max(info["mission_time"])))
+        return True

@@ -1,0 +1,238 @@
+"""Linearly decayed Ornstein-Uhlenbeck action noise (DT-DPG, Section IV-B of the paper)."""
+
+import copy
+import warnings
+from typing import Any
+
+import numpy as np
+from numpy.typing import DTypeLike
+from stable_baselines3.common.noise import ActionNoise, OrnsteinUhlenbeckActionNoise, VectorizedActionNoise
+
+
+def _as_sigma(name: str, value: float | np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    try:
+        array = np.broadcast_to(np.asarray(value, dtype=np.float64), shape).copy()
+    except (TypeError, ValueError) as e:
+        raise ValueError(
+            f"{name} must be a number or an array broadcastable to the action shape {shape}, got {value!r}"
+        ) from e
+    if not np.all(np.isfinite(array)) or np.any(array < 0):
+        raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+    return array
+
+
+def _as_decay_episodes(value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"decay_episodes must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+class _EpisodeSchedule:
+    """
+    The sigma schedule and its episode counter, shared by every copy of one noise
+    (see :class:`LinearDecayOUNoise` on vectorized environments).
+    """
+
+    def __init__(self, sigma: np.ndarray, final_sigma: np.ndarray, decay_episodes: int) -> None:
+        self.sigma = sigma
+        self.final_sigma = final_sigma
+        self.decay_episodes = decay_episodes
+        self.episodes = 0
+        self.current = sigma.copy()
+
+    def set_episode(self, episodes: int) -> None:
+        self.episodes = episodes
+        # sigma_k = sigma_0 + (sigma_final - sigma_0) * k / K, evaluated from k each time (no drift), then sigma_final
+        # exactly (the formula at k = K can be off by one ulp)
+        if episodes >= self.decay_episodes:
+            self.current = self.final_sigma.copy()
+        else:
+            self.current = self.sigma + (self.final_sigma - self.sigma) * episodes / self.decay_episodes
+
+
+class LinearDecayOUNoise(OrnsteinUhlenbeckActionNoise):
+    """
+    Ornstein-Uhlenbeck action noise whose scale falls linearly per episode, the exploration noise of DT-DPG
+    (Zhong et al., "Path Design and Resource Management for NOMA enhanced Indoor Intelligent Robots",
+    Section IV-B: "linearly diminishing OU noise", the noise scale being a function of the training task and
+    the episode number, updated at the start of every episode, Algorithm 1).
+
+    In episode ``k`` (counting from 0 since construction or the last :meth:`rearm`) the scale is
+    ``sigma_k = sigma + (final_sigma - sigma) * k / decay_episodes`` for ``k < decay_episodes``, then
+    exactly ``final_sigma``. :meth:`reset` ends an episode:
+    it resets the OU state (as SB3's ``OrnsteinUhlenbeckActionNoise`` does) and advances the schedule.
+    A ``reset()`` with no noise drawn since the previous one does not count as an episode: SB3 also calls
+    ``reset()`` when the noise is built, when ``VectorizedActionNoise`` wraps it and at the start of every
+    ``learn()``, and these calls must not move the schedule. (A ``learn()`` call that starts in the middle of
+    an episode therefore counts the interrupted part as one episode.)
+
+    Vectorized environments: SB3's ``VectorizedActionNoise`` deep-copies the noise once per environment.
+    The copies keep their own OU state but **share one episode counter**: the schedule advances once per
+    finished episode of *any* environment, so ``decay_episodes`` counts episodes in total, like the
+    curriculum's episode budgets, whatever the number of environments. This sharing is implemented in
+    ``__deepcopy__``; a pickle round-trip (``model.save`` / ``load``) keeps the sharing between the copies
+    it saves together, and ``pickle.loads(pickle.dumps(noise))`` gives a fully independent copy.
+
+    :param mean: Mean of the noise (its shape is the action shape)
+    :param sigma: Initial scale of the noise (a number or one value per action dimension)
+    :param final_sigma: Scale reached after ``decay_episodes`` episodes
+    :param decay_episodes: Number of episodes over which the scale falls from ``sigma`` to ``final_sigma``
+    :param theta: Rate of mean reversion
+    :param dt: Timestep for the noise
+    :param initial_noise: Initial value for the noise output (if None: 0)
+    :param dtype: Type of the output noise
+    """
+
+    def __init__(
+        self,
+        mean: np.ndarray,
+        sigma: float | np.ndarray,
+        final_sigma: float | np.ndarray,
+        decay_episodes: int,
+        theta: float = 0.15,
+        dt: float = 1e-2,
+        initial_noise: np.ndarray | None = None,
+        dtype: DTypeLike = np.float32,
+    ) -> None:
+        mean = np.asarray(mean)
+        for name, value in (("theta", theta), ("dt", dt)):
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        self._schedule = _EpisodeSchedule(
+            _as_sigma("sigma", sigma, mean.shape),
+            _as_sigma("final_sigma", final_sigma, mean.shape),
+            _as_decay_episodes(decay_episodes),
+        )
+        self._steps_since_reset = 0
+        # The parent stores ``sigma`` as ``self._sigma``: here that is a property of the schedule.
+        ActionNoise.__init__(self)
+        self._theta = theta
+        self._mu = mean
+        self._dt = dt
+        self._dtype = dtype
+        self.initial_noise = initial_noise
+        self.reset()
+
+    @property
+    def _sigma(self) -> np.ndarray:  # read by OrnsteinUhlenbeckActionNoise.__call__
+        return self._schedule.current
+
+    @property
+    def current_sigma(self) -> np.ndarray:
+        """The noise scale of the current episode (one value per action dimension)."""
+        return self._schedule.current.copy()
+
+    @property
+    def episode(self) -> int:
+        """Episodes finished since construction or the last :meth:`rearm` (shared by vectorized copies)."""
+        return self._schedule.episodes
+
+    @property
+    def final_sigma(self) -> np.ndarray:
+        return self._schedule.final_sigma.copy()
+
+    @property
+    def decay_episodes(self) -> int:
+        return self._schedule.decay_episodes
+
+    def __call__(self) -> np.ndarray:
+        self._steps_since_reset += 1
+        return super().__call__()
+
+    def reset(self) -> None:
+        """End an episode: advance the sigma schedule (if any noise was drawn in it) and reset the OU state."""
+        if self._steps_since_reset > 0:
+            self._schedule.set_episode(self._schedule.episodes + 1)
+        self._steps_since_reset = 0
+        super().reset()
+
+    def rearm(
+        self,
+        sigma: float | np.ndarray,
+        final_sigma: float | np.ndarray | None = None,
+        decay_episodes: int | None = None,
+    ) -> None:
+        """
+        Restart the schedule from episode 0 with a new initial scale (at a curriculum transfer).
+        The episode in progress does not count towards the new schedule.
+
+        :param sigma: New initial scale
+        :param final_sigma: New final scale (None: keep the current one)
+        :param decay_episodes: New decay horizon in episodes (None: keep the current one)
+        """
+        schedule = self._schedule
+        schedule.sigma = _as_sigma("sigma", sigma, self._mu.shape)
+        if final_sigma is not None:
+            schedule.final_sigma = _as_sigma("final_sigma", final_sigma, self._mu.shape)
+        if decay_episodes is not None:
+            schedule.decay_episodes = _as_decay_episodes(decay_episodes)
+        schedule.set_episode(0)
+        self._steps_since_reset = 0
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> "LinearDecayOUNoise":
+        # Share the schedule between copies (SB3's VectorizedActionNoise deep-copies the noise per env)
+        memo[id(self._schedule)] = self._schedule
+        clone = self.__class__.__new__(self.__class__)
+        memo[id(self)] = clone
+        clone.__dict__.update(copy.deepcopy(self.__dict__, memo))
+        return clone
+
+    def __repr__(self) -> str:
+        return (
+            f"LinearDecayOUNoise(mu={self._mu}, sigma={self._schedule.sigma}, final_sigma={self._schedule.final_sigma}, "
+            f"decay_episodes={self._schedule.decay_episodes}, episode={self._schedule.episodes})"
+        )
+
+
+def _noises(action_noise: ActionNoise) -> list[ActionNoise]:
+    if isinstance(action_noise, VectorizedActionNoise):
+        return [action_noise.base_noise, *action_noise.noises]
+    return [action_noise]
+
+
+def rearm_noise(
+    action_noise: ActionNoise | None,
+    sigma: float | np.ndarray,
+    final_sigma: float | np.ndarray | None = None,
+    decay_episodes: int | None = None,
+) -> None:
+    """
+    Re-arm the exploration noise of a model with a new initial scale (at a curriculum transfer).
+
+    Works on a :class:`LinearDecayOUNoise`, on SB3's ``VectorizedActionNoise`` wrapping one, and on SB3's
+    constant-scale ``NormalActionNoise`` / ``OrnsteinUhlenbeckActionNoise`` (their scale is set to ``sigma``;
+    a decay cannot be applied to them and is ignored with a warning). ``None`` (no noise) is left alone.
+
+    :param action_noise: The noise to re-arm (``model.action_noise``)
+    :param sigma: New initial scale
+    :param final_sigma: New final scale (None: keep the current one)
+    :param decay_episodes: New decay horizon in episodes (None: keep the current one)
+    """
+    if action_noise is None:
+        return
+    for noise in _noises(action_noise):
+        if isinstance(noise, LinearDecayOUNoise):
+            noise.rearm(sigma, final_sigma, decay_episodes)
+        elif hasattr(noise, "_sigma") and hasattr(noise, "_mu"):
+            noise._sigma = _as_sigma("sigma", sigma, np.shape(noise._mu))
+            if final_sigma is not None and not np.allclose(final_sigma, sigma):
+                warnings.warn(f"{type(noise).__name__} has a constant scale: final_sigma={final_sigma!r} is ignored")
+        else:
+            raise TypeError(f"Cannot re-arm action noise of type {type(noise).__name__}")
+
+
+def noise_sigma(action_noise: ActionNoise | None) -> float:
+    """
+    The current scale of a model's exploration noise, averaged over action dimensions (for logging).
+
+    :param action_noise: ``model.action_noise``: a :class:`LinearDecayOUNoise`, SB3's ``VectorizedActionNoise``
+        wrapping one, or SB3's ``NormalActionNoise`` / ``OrnsteinUhlenbeckActionNoise``; None counts as 0
+    :return: The mean of the current sigma
+    """
+    if action_noise is None:
+        return 0.0
+    if isinstance(action_noise, VectorizedActionNoise):
+        action_noise = action_noise.base_noise
+    if not hasattr(action_noise, "_sigma"):
+        raise TypeError(f"Cannot read the scale of action noise of type {type(action_noise).__name__}")
+    return float(np.mean(action_noise._sigma))

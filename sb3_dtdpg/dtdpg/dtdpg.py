@@ -1,0 +1,191 @@
+import dataclasses
+from collections.abc import Iterable, Mapping
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from stable_baselines3 import DDPG
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
+from stable_baselines3.common.noise import ActionNoise
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+
+from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
+from sb3_dtdpg.common.callbacks import CurriculumTransferCallback, MissionLoggerCallback
+from sb3_dtdpg.common.noise import LinearDecayOUNoise
+from sb3_dtdpg.common.phases import Phase, default_phases, parse_phases, single_phase
+from sb3_dtdpg.dtdpg.policies import DTDPGPolicy, MlpPolicy
+
+SelfDTDPG = TypeVar("SelfDTDPG", bound="DTDPG")
+
+
+class DTDPG(DDPG):
+    """
+    Deep Transfer Deterministic Policy Gradient (DT-DPG).
+
+    Paper: W. Zhong, ..., "Path Design and Resource Management for NOMA enhanced Indoor Intelligent Robots"
+    (Section IV, Algorithm 1; hyperparameters in Section V, Table I).
+
+    DDPG with three changes: batch-normalised actor and critic (:class:`~sb3_dtdpg.dtdpg.policies.DTDPGPolicy`),
+    an Ornstein-Uhlenbeck exploration noise whose scale falls linearly per episode
+    (:class:`~sb3_dtdpg.common.noise.LinearDecayOUNoise`), and a curriculum of reward phases trained one after
+    the other, the networks carrying over from one phase to the next
+    (:class:`~sb3_dtdpg.common.callbacks.CurriculumTransferCallback`, added by :meth:`learn`). The curriculum
+    state is kept in ``model.curriculum_state`` and saved with the model, so repeated ``learn()`` calls, and
+    ``load()`` then ``learn(..., reset_num_timesteps=False)``, continue in the same phase.
+
+    Defaults follow the paper's Table I (learning rate 1e-4, batch 64, tau 0.002, buffer 5e4, Adam, hidden
+    layers of 64-128 units, OU scale 0.5 then 0.4), except ``gamma``: the paper's ``gamma = 1`` is only
+    stable with episodes that always end; 0.99 is the default.
+
+    :param policy: The policy model to use (``"MlpPolicy"``: the batch-norm policy)
+    :param env: The environment to learn from (if registered in Gym, can be str)
+    :param learning_rate: learning rate for adam optimizer,
+        the same learning rate will be used for all networks (Q-Values, Actor and Value function)
+        it can be a function of the current progress remaining (from 1 to 0)
+    :param buffer_size: size of the replay buffer
+    :param learning_starts: how many steps of the model to collect transitions for before learning starts
+    :param batch_size: Minibatch size for each gradient update
+    :param tau: the soft update coefficient ("Polyak update", between 0 and 1)
+    :param gamma: the discount factor
+    :param train_freq: Update the model every ``train_freq`` steps. Alternatively pass a tuple of frequency and unit
+        like ``(5, "step")`` or ``(2, "episode")``.
+    :param gradient_steps: How many gradient steps to do after each rollout (see ``train_freq``)
+        Set to ``-1`` means to do as many gradient steps as steps done in the environment
+        during the rollout.
+    :param action_noise: the action noise; None (default): a :class:`~sb3_dtdpg.common.noise.LinearDecayOUNoise`
+        armed from the first phase (no noise when that phase has no ``sigma``), re-armed by each phase. A given
+        noise is used as is with the default phases; phases given with a ``sigma`` re-arm it (see
+        :func:`~sb3_dtdpg.common.noise.rearm_noise`).
+    :param replay_buffer_class: Replay buffer class to use (for instance ``HerReplayBuffer``).
+        If ``None``: :class:`~sb3_dtdpg.common.buffers.RewardComponentsReplayBuffer` when a phase relabels
+        the replay buffer, else SB3's choice.
+    :param replay_buffer_kwargs: Keyword arguments to pass to the replay buffer on creation.
+    :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer
+        at a cost of more complexity.
+        See https://github.com/DLR-RM/stable-baselines3/issues/37#issuecomment-637501195
+    :param n_steps: When n_step > 1, uses n-step return (with the NStepReplayBuffer) when updating the Q-value network.
+    :param tensorboard_log: the log location for tensorboard (if None, no logging)
+    :param policy_kwargs: additional arguments to be passed to the policy on creation
+        (``net_arch``, ``activation_fn``, ``batch_norm_momentum``, ``batch_norm_eps``, ...)
+    :param verbose: Verbosity level: 0 for no output, 1 for info messages (such as device or wrappers used), 2 for
+        debug messages
+    :param seed: Seed for the pseudo random generators
+    :param device: Device (cpu, cuda, ...) on which the code should be run.
+        Setting it to auto, the code will be run on the GPU if possible.
+    :param phases: The curriculum: :class:`~sb3_dtdpg.common.phases.Phase` objects or dicts of their fields
+        (YAML). None: the paper's two phases ("destination" then "mqi") on an env with reward phases
+        (``set_reward_phase``), else a single phase that leaves the reward alone.
+    :param curriculum_save_path: Folder where the model is saved at the end of each phase
+        (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved
+    :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
+        them over (ablation of the transfer)
+    :param _init_setup_model: Whether or not to build the network at the creation of the instance
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}
+    policy: DTDPGPolicy
+
+    def __init__(
+        self,
+        policy: str | type[DTDPGPolicy],
+        env: GymEnv | str,
+        learning_rate: float | Schedule = 1e-4,
+        buffer_size: int = 50_000,
+        learning_starts: int = 100,
+        batch_size: int = 64,
+        tau: float = 0.002,
+        gamma: float = 0.99,
+        train_freq: int | tuple[int, str] = 1,
+        gradient_steps: int = 1,
+        action_noise: ActionNoise | None = None,
+        replay_buffer_class: type[ReplayBuffer] | None = None,
+        replay_buffer_kwargs: dict[str, Any] | None = None,
+        optimize_memory_usage: bool = False,
+        n_steps: int = 1,
+        tensorboard_log: str | None = None,
+        policy_kwargs: dict[str, Any] | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: th.device | str = "auto",
+        phases: Iterable[Phase | Mapping[str, Any]] | None = None,
+        curriculum_save_path: str | None = None,
+        reinitialize_at_transfer: bool = False,
+        _init_setup_model: bool = True,
+    ):
+        super().__init__(
+            policy=policy,
+            env=env,
+            learning_rate=learning_rate,
+            buffer_size=buffer_size,
+            learning_starts=learning_starts,
+            batch_size=batch_size,
+            tau=tau,
+            gamma=gamma,
+            train_freq=train_freq,
+            gradient_steps=gradient_steps,
+            action_noise=action_noise,
+            replay_buffer_class=replay_buffer_class,
+            replay_buffer_kwargs=replay_buffer_kwargs,
+            optimize_memory_usage=optimize_memory_usage,
+            n_steps=n_steps,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=policy_kwargs,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+        )
+        self.curriculum_save_path = curriculum_save_path
+        self.reinitialize_at_transfer = reinitialize_at_transfer
+        # Set by CurriculumTransferCallback at the first learn(), then saved with the model
+        self.curriculum_state: dict[str, Any] | None = None
+        if phases is not None:
+            self.phases = parse_phases(phases)
+        else:
+            if self.env is not None and self.env.has_attr("set_reward_phase"):
+                self.phases = default_phases()
+            else:
+                self.phases = single_phase(sigma=0.5, final_sigma=0.1, decay_episodes=300)
+            if action_noise is not None:  # the user's noise is used as is: the default phases leave it alone
+                self.phases = [dataclasses.replace(p, sigma=None, final_sigma=None, decay_episodes=None) for p in self.phases]
+
+        schedule = self.phases[0].noise_schedule()
+        # No env when load() builds the model: the saved action noise is restored afterwards
+        if self.action_noise is None and schedule is not None and self.env is not None:
+            mean = np.zeros(self.action_space.shape, dtype=np.float32)
+            self.action_noise = LinearDecayOUNoise(mean, *schedule)
+        if self.replay_buffer_class is None and any(phase.replay_handling == "relabel" for phase in self.phases[1:]):
+            self.replay_buffer_class = RewardComponentsReplayBuffer
+
+        if _init_setup_model:
+            self._setup_model()
+
+    def learn(
+        self: SelfDTDPG,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 4,
+        tb_log_name: str = "DTDPG",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfDTDPG:
+        curriculum = CurriculumTransferCallback(
+            self.phases,
+            save_path=self.curriculum_save_path,
+            reinitialize_networks=self.reinitialize_at_transfer,
+            verbose=self.verbose,
+        )
+        callbacks: list[BaseCallback] = [curriculum, MissionLoggerCallback()]
+        for user_callback in callback if isinstance(callback, list) else [callback]:
+            if user_callback is not None:
+                callbacks.append(user_callback if isinstance(user_callback, BaseCallback) else ConvertCallback(user_callback))
+        return super().learn(
+            total_timesteps=total_timesteps,
+            callback=CallbackList(callbacks),
+            log_interval=log_interval,
+            tb_log_name=tb_log_name,
+            reset_num_timesteps=reset_num_timesteps,
+            progress_bar=progress_bar,
+        )

@@ -1,0 +1,18 @@
+"""
+``python -m sb3_dtdpg.enjoy``: the RL Zoo's ``enjoy`` with DT-DPG registered, to watch or evaluate
+a model trained with ``python -m sb3_dtdpg.train`` (``--algo dtdpg --env NomaRadioMap-v0 -f logs/``).
+"""
+
+import rl_zoo3.enjoy
+
+from sb3_dtdpg.zoo import register_dtdpg
+
+
+def main() -> None:
+    """Run the RL Zoo's enjoy script with ``dtdpg`` among its algorithms."""
+    register_dtdpg()
+    rl_zoo3.enjoy.enjoy()
+
+
+if __name__ == "__main__":
+    main()

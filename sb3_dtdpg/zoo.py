@@ -1,0 +1,166 @@
+"""
+RL Baselines3 Zoo integration: DT-DPG as one of the zoo's algorithms.
+
+Custom algorithms join the zoo by adding themselves to its tables before its ``train()``/``enjoy()`` run
+(the pattern sbx documents): :func:`register_dtdpg` adds ``"dtdpg"`` to ``rl_zoo3.ALGOS``, its Optuna
+sampler to ``HYPERPARAMS_SAMPLER`` (``--optimize``) and its converter to ``HYPERPARAMS_CONVERTER``
+(``--trial-id``, which reads a stored trial's raw parameters back through the converter).
+Importing this module also imports :mod:`noma_radiomap`, so the NomaRadioMap env ids need no ``--gym-packages``.
+
+:class:`ExperimentManager` is the zoo's own, with two small fixes for rl_zoo3 2.9 used by
+``python -m sb3_dtdpg.train`` (see its docstring).
+"""
+
+import dataclasses
+from typing import Any
+
+import noma_radiomap  # noqa: F401  (registers the NomaRadioMap env ids)
+import optuna
+import rl_zoo3
+import rl_zoo3.exp_manager
+from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
+
+from sb3_dtdpg.common.phases import REPLAY_HANDLINGS, default_phases
+from sb3_dtdpg.dtdpg import DTDPG
+
+ALGO_NAME = "dtdpg"
+
+# Hidden layers (actor and critic alike). The paper uses 64-128 units per layer (Section V).
+NET_ARCHS: dict[str, list[int]] = {
+    "64-64": [64, 64],
+    "128-64": [128, 64],
+    "128-128": [128, 128],
+    "256-256": [256, 256],
+}
+# Early transfer out of the destination phase: success rate over the last episodes (None: budget only).
+EARLY_TRANSFER_THRESHOLDS: tuple[float | None, ...] = (None, 0.8, 0.9, 0.95)
+
+
+def sample_dtdpg_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    Sampler for DT-DPG hyperparameters (``--optimize --algo dtdpg``), built like the zoo's TD3 sampler.
+
+    Besides DDPG's learning rate, discount, tau, batch size and network size it searches DT-DPG's own
+    settings: the destination phase's episode budget and early-transfer threshold, both phases' initial
+    OU noise scales, the MQI phase's noise-decay horizon and the replay handling when entering it.
+    Phase budgets are in episodes (at most ``max_episode_steps`` env steps each): give the trials an
+    ``-n`` that covers them, or the MQI phase is never reached.
+
+    :param trial: Optuna trial.
+    :param n_actions: Action dimension (unused: DT-DPG builds its own noise from the phases).
+    :param n_envs: Number of training envs (unused).
+    :param additional_args: The zoo's extra arguments (HER settings; unused).
+    :return: ``DTDPG`` keyword arguments, :func:`convert_dtdpg_params` of the trial's raw parameters.
+    """
+    params: dict[str, Any] = {
+        # The paper's range is 1e-5 to 1e-3 (Section V).
+        "learning_rate": trial.suggest_float("learning_rate", 1e-5, 1e-3, log=True),
+        "one_minus_gamma": trial.suggest_float("one_minus_gamma", 1e-4, 0.05, log=True),
+        "tau": trial.suggest_float("tau", 5e-4, 0.05, log=True),
+        # 2**5=32 to 2**8=256
+        "batch_size_pow": trial.suggest_int("batch_size_pow", 5, 8),
+        "net_arch": trial.suggest_categorical("net_arch", list(NET_ARCHS)),
+        "phase1_episodes": trial.suggest_int("phase1_episodes", 20, 500, log=True),
+        "phase1_sigma": trial.suggest_float("phase1_sigma", 0.1, 0.8),
+        "success_threshold": trial.suggest_categorical("success_threshold", EARLY_TRANSFER_THRESHOLDS),
+        "phase2_sigma": trial.suggest_float("phase2_sigma", 0.05, 0.6),
+        "phase2_decay_episodes": trial.suggest_int("phase2_decay_episodes", 20, 500, log=True),
+        "replay_handling": trial.suggest_categorical("replay_handling", REPLAY_HANDLINGS),
+    }
+    hyperparams = convert_dtdpg_params(params)
+    trial.set_user_attr("gamma", hyperparams["gamma"])
+    trial.set_user_attr("batch_size", hyperparams["batch_size"])
+    return hyperparams
+
+
+def convert_dtdpg_params(sampled_params: dict[str, Any]) -> dict[str, Any]:
+    """
+    Turn a DT-DPG trial's raw parameters into ``DTDPG`` keyword arguments
+    (the counterpart of the zoo's ``convert_offpolicy_params``).
+
+    The phases are the paper's two (:func:`sb3_dtdpg.common.phases.default_phases`) with the sampled
+    budget, threshold, noise scales and replay handling, as plain dicts so that the zoo's saved
+    ``config.yml`` stays readable YAML.
+
+    :param sampled_params: ``trial.params`` of a trial sampled by :func:`sample_dtdpg_params`.
+    :return: ``DTDPG`` keyword arguments.
+    """
+    params = dict(sampled_params)
+    try:
+        net_arch_name = params.pop("net_arch")
+        if net_arch_name not in NET_ARCHS:
+            raise ValueError(f"net_arch must be one of {list(NET_ARCHS)}, got {net_arch_name!r}")
+        destination, mqi = default_phases(
+            destination_episodes=params.pop("phase1_episodes"),
+            success_threshold=params.pop("success_threshold"),
+            replay_handling=params.pop("replay_handling"),
+        )
+        phases = [
+            dataclasses.replace(destination, sigma=params.pop("phase1_sigma")),
+            dataclasses.replace(mqi, sigma=params.pop("phase2_sigma"), decay_episodes=params.pop("phase2_decay_episodes")),
+        ]
+        hyperparams = {
+            "learning_rate": params.pop("learning_rate"),
+            "gamma": 1 - params.pop("one_minus_gamma"),
+            "tau": params.pop("tau"),
+            "batch_size": 2 ** params.pop("batch_size_pow"),
+            "policy_kwargs": {"net_arch": list(NET_ARCHS[net_arch_name])},
+            "phases": [phase.to_dict() for phase in phases],
+        }
+    except KeyError as e:
+        raise ValueError(f"DT-DPG search parameter {e.args[0]!r} is missing from {sampled_params!r}") from e
+    if params:
+        raise ValueError(f"unknown DT-DPG search parameter(s) {sorted(params)} in {sampled_params!r}")
+    return hyperparams
+
+
+def register_dtdpg() -> None:
+    """
+    Add DT-DPG to the RL Zoo's algorithms, samplers and converters (idempotent).
+    ``rl_zoo3.train``, ``rl_zoo3.enjoy`` and ``rl_zoo3.exp_manager`` all share these dicts.
+    """
+    rl_zoo3.ALGOS[ALGO_NAME] = DTDPG
+    HYPERPARAMS_SAMPLER[ALGO_NAME] = sample_dtdpg_params
+    HYPERPARAMS_CONVERTER[ALGO_NAME] = convert_dtdpg_params
+
+
+class _TrialNumber(int):
+    """A trial number that is truthy even when it is 0 (see :class:`ExperimentManager`)."""
+
+    def __bool__(self) -> bool:
+        return True
+
+
+class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
+    """
+    The RL Zoo's experiment manager (same arguments), with two fixes for rl_zoo3 2.9:
+
+    - ``--trial-id 0`` (the first trial of a study) is honoured: the zoo tests ``self.trial_id`` for truth,
+      so trial 0 was silently skipped and the YAML defaults trained instead (DLR-RM/rl-baselines3-zoo#498).
+      ``--trial-id`` without ``--storage`` and ``--study-name`` is an error instead of being ignored.
+    - ``env_kwargs`` from the hyperparameter file also reach the evaluation env unless ``--eval-env-kwargs``
+      is given, as the zoo intends ("use env-kwargs if eval_env_kwargs was not specified"); in 2.9 they only
+      did when ``--env-kwargs`` was given too, so e.g. DDPG's ``reward_phase: combined`` was evaluated on
+      the env's default reward.
+
+    For DT-DPG training runs it also puts the curriculum's phase checkpoints (``phase_<k>_<name>.zip``)
+    in the run's log folder, unless the hyperparameters set ``curriculum_save_path`` themselves.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if self.trial_id is not None:
+            if not (self.storage and self.study_name):
+                raise ValueError(
+                    f"--trial-id {self.trial_id} needs --storage and --study-name to find the trial, "
+                    f"got storage={self.storage!r}, study_name={self.study_name!r}"
+                )
+            self.trial_id = _TrialNumber(self.trial_id)
+
+    def _preprocess_hyperparams(self, hyperparams: dict[str, Any]) -> tuple[Any, ...]:
+        hyperparams, *others = super()._preprocess_hyperparams(hyperparams)
+        if self._eval_env_kwargs_args is None:
+            self.eval_env_kwargs = self.env_kwargs
+        if self.algo == ALGO_NAME and not self.optimize_hyperparameters:
+            hyperparams.setdefault("curriculum_save_path", self.save_path)
+        return (hyperparams, *others)

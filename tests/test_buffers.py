@@ -1,0 +1,133 @@
+import numpy as np
+import pytest
+from gymnasium import spaces
+from phased_env import PHASE_WEIGHTS, PhasedPointEnv
+from stable_baselines3 import DDPG
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+
+from sb3_dtdpg.common.buffers import REWARD_COMPONENTS, RewardComponentsReplayBuffer
+
+OBS_SPACE = spaces.Box(-1, 1, (2,), np.float32)
+ACT_SPACE = spaces.Box(-1, 1, (1,), np.float32)
+
+
+def make_buffer(size=8, n_envs=2, **kwargs):
+    return RewardComponentsReplayBuffer(size, OBS_SPACE, ACT_SPACE, device="cpu", n_envs=n_envs, **kwargs)
+
+
+def random_components(rng):
+    return {key: float(rng.normal()) for key in REWARD_COMPONENTS}
+
+
+def add_transitions(buffer, n_steps, rng):
+    """Add n_steps vector steps; return the components and rewards added, as arrays (n_steps, n_envs, ...)."""
+    comps, rewards = [], []
+    for _ in range(n_steps):
+        infos = [{"reward_components": random_components(rng)} for _ in range(buffer.n_envs)]
+        reward = rng.normal(size=buffer.n_envs).astype(np.float32)
+        obs = rng.uniform(-1, 1, (buffer.n_envs, 2)).astype(np.float32)
+        next_obs = rng.uniform(-1, 1, (buffer.n_envs, 2)).astype(np.float32)
+        action = rng.uniform(-1, 1, (buffer.n_envs, 1)).astype(np.float32)
+        buffer.add(obs, next_obs, action, reward, np.zeros(buffer.n_envs), infos)
+        comps.append([[info["reward_components"][key] for key in REWARD_COMPONENTS] for info in infos])
+        rewards.append(reward)
+    return np.array(comps), np.array(rewards)
+
+
+@pytest.mark.parametrize("optimize_memory_usage", [False, True])
+def test_stores_components_per_transition_and_env(optimize_memory_usage):
+    rng = np.random.default_rng(0)
+    buffer = make_buffer(
+        size=10, n_envs=2, optimize_memory_usage=optimize_memory_usage, handle_timeout_termination=not optimize_memory_usage
+    )
+    # 5 slots per env; 7 steps wrap around: slots 0, 1 hold steps 5, 6 and slots 2-4 hold steps 2-4
+    comps, rewards = add_transitions(buffer, 7, rng)
+    assert buffer.buffer_size == 5 and buffer.full and buffer.pos == 2
+    expected = np.concatenate([comps[5:7], comps[2:5]])
+    np.testing.assert_array_equal(buffer.reward_components, expected)
+    np.testing.assert_array_equal(buffer.rewards, np.concatenate([rewards[5:7], rewards[2:5]]))
+
+
+def test_relabel_recomputes_every_reward():
+    rng = np.random.default_rng(1)
+    buffer = make_buffer(size=8, n_envs=2)
+    comps, _ = add_transitions(buffer, 3, rng)
+    weights = {"time": 1.0, "qos": 2.0, "arrival": 0.5, "success": 1.0}  # "inducing" left out: weight 0
+    buffer.relabel(weights)
+    w = np.array([1.0, 0.0, 2.0, 0.5, 1.0])
+    np.testing.assert_allclose(buffer.rewards[:3], np.einsum("tek,k->te", comps, w), rtol=1e-6)
+    # Sampling returns the relabelled rewards
+    samples = buffer.sample(16)
+    flat = buffer.rewards[:3].reshape(-1)
+    assert all(np.isclose(flat, r, rtol=1e-6).any() for r in samples.rewards.numpy().reshape(-1))
+
+
+def test_relabel_rejects_unknown_component():
+    buffer = make_buffer()
+    with pytest.raises(ValueError, match="speed"):
+        buffer.relabel({"speed": 1.0})
+
+
+def test_missing_components_name_the_key():
+    buffer = make_buffer(n_envs=2)
+    obs = np.zeros((2, 2), np.float32)
+    act = np.zeros((2, 1), np.float32)
+    good = {"reward_components": dict.fromkeys(REWARD_COMPONENTS, 0.0)}
+    bad = {"reward_components": {k: 0.0 for k in REWARD_COMPONENTS if k != "qos"}}
+    with pytest.raises(ValueError, match="'qos'"):
+        buffer.add(obs, obs, act, np.zeros(2), np.zeros(2), [good, bad])
+    with pytest.raises(ValueError, match="reward_components"):
+        buffer.add(obs, obs, act, np.zeros(2), np.zeros(2), [good, {}])
+    assert buffer.size() == 0  # nothing half-written
+
+
+def test_clear_empties():
+    buffer = make_buffer()
+    add_transitions(buffer, 3, np.random.default_rng(2))
+    assert buffer.size() == 3  # rows of n_envs transitions
+    buffer.clear()
+    assert buffer.size() == 0 and not buffer.full
+
+
+def test_pickle_keeps_components(tmp_path):
+    from stable_baselines3.common.save_util import load_from_pkl, save_to_pkl
+
+    buffer = make_buffer()
+    comps, _ = add_transitions(buffer, 3, np.random.default_rng(3))
+    save_to_pkl(tmp_path / "rb.pkl", buffer)
+    loaded = load_from_pkl(tmp_path / "rb.pkl")
+    np.testing.assert_array_equal(loaded.reward_components[:3], comps)
+    assert loaded.component_keys == REWARD_COMPONENTS
+
+
+class _RecordInfos(BaseCallback):
+    def __init__(self):
+        super().__init__()
+        self.components, self.rewards = [], []
+
+    def _on_step(self) -> bool:
+        self.components.append([[info["reward_components"][k] for k in REWARD_COMPONENTS] for info in self.locals["infos"]])
+        self.rewards.append(np.array(self.locals["rewards"]))
+        return True
+
+
+def test_with_ddpg_on_phased_env():
+    env = make_vec_env(PhasedPointEnv, n_envs=2, seed=0)
+    model = DDPG(
+        "MlpPolicy",
+        env,
+        learning_starts=20,
+        policy_kwargs={"net_arch": [8]},
+        replay_buffer_class=RewardComponentsReplayBuffer,
+        seed=0,
+    )
+    recorder = _RecordInfos()
+    model.learn(30, callback=recorder)
+    buffer = model.replay_buffer
+    assert buffer.pos == 15
+    np.testing.assert_array_equal(buffer.reward_components[:15], np.array(recorder.components))
+    np.testing.assert_array_equal(buffer.rewards[:15], np.array(recorder.rewards, dtype=np.float32))
+    # The env's reward is the weighted sum of its components
+    w = np.array([PHASE_WEIGHTS["destination"][k] for k in REWARD_COMPONENTS])
+    np.testing.assert_allclose(buffer.rewards[:15], buffer.reward_components[:15] @ w, rtol=1e-6)

@@ -1,0 +1,219 @@
+"""SB3's generic checks applied to DTDPG (run, save/load, replay buffer, set_env, determinism, multi-env)."""
+
+import inspect
+import os
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium.wrappers import TimeLimit
+from phased_env import PhasedPointEnv
+from stable_baselines3 import DDPG
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.noise import NormalActionNoise, VectorizedActionNoise
+
+from sb3_dtdpg import DTDPG, LinearDecayOUNoise, Phase
+from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
+from sb3_dtdpg.dtdpg.policies import DTDPGPolicy
+
+TINY = dict(policy_kwargs=dict(net_arch=[32]), learning_starts=50, batch_size=32)
+
+
+def _pendulum(max_episode_steps: int = 200) -> gym.Env:
+    return TimeLimit(gym.make("Pendulum-v1").unwrapped, max_episode_steps=max_episode_steps)
+
+
+def _phased() -> gym.Env:
+    # the robot cannot reach its destination in 20 steps: every episode lasts exactly 20 steps
+    return TimeLimit(PhasedPointEnv(v_max=0.02, starts=[[0.05, 0.05]], destinations=[[0.95, 0.95]]), max_episode_steps=20)
+
+
+def _params(model: DTDPG) -> dict[str, th.Tensor]:
+    return {f"{key}.{name}": value for key, state in model.get_parameters().items() for name, value in state.items()}
+
+
+def _assert_same_params(model_a: DTDPG, model_b: DTDPG) -> None:
+    params_a, params_b = _params(model_a), _params(model_b)
+    assert params_a.keys() == params_b.keys()
+    for key in params_a:
+        th.testing.assert_close(params_a[key], params_b[key], rtol=0, atol=0, msg=key)
+
+
+def test_defaults_follow_table_1():
+    model = DTDPG("MlpPolicy", "Pendulum-v1")
+    assert (model.learning_rate, model.batch_size, model.tau, model.buffer_size, model.gamma) == (
+        1e-4,
+        64,
+        0.002,
+        50_000,
+        0.99,
+    )
+    assert isinstance(model.policy, DTDPGPolicy)
+    assert isinstance(model.actor.optimizer, th.optim.Adam)
+    assert [layer.out_features for layer in model.actor.mu if isinstance(layer, th.nn.Linear)] == [128, 64, 1]
+    assert len(model.critic.q_networks) == 1  # DDPG: one critic
+    assert model.policy_delay == 1 and model.target_noise_clip == 0.0
+    # the noise: linearly decayed OU armed from the single phase of an env without reward phases
+    assert [phase.reward_phase for phase in model.phases] == [None]
+    assert isinstance(model.action_noise, LinearDecayOUNoise)
+    np.testing.assert_array_equal(model.action_noise.current_sigma, [model.phases[0].sigma])
+
+
+def test_is_a_drop_in_for_ddpg():
+    ddpg_args = list(inspect.signature(DDPG.__init__).parameters)
+    dtdpg_args = list(inspect.signature(DTDPG.__init__).parameters)
+    assert dtdpg_args[: len(ddpg_args) - 1] == ddpg_args[:-1]  # same order, _init_setup_model last
+    assert dtdpg_args[-1] == "_init_setup_model"
+
+
+def test_phases_and_noise_on_a_phased_env():
+    model = DTDPG("MlpPolicy", PhasedPointEnv())
+    assert [(phase.name, phase.reward_phase) for phase in model.phases] == [("destination", "destination"), ("mqi", "mqi")]
+    assert noise_sigma_of(model) == 0.5
+    # a user's noise is used as is: the default phases do not re-arm it
+    user_noise = NormalActionNoise(np.zeros(3), 0.2 * np.ones(3))
+    model = DTDPG("MlpPolicy", _phased(), action_noise=user_noise, phases=None, **TINY)
+    assert model.action_noise is user_noise
+    assert [phase.sigma for phase in model.phases] == [None, None]
+    model.learn(60)
+    assert model.action_noise is user_noise and noise_sigma_of(model) == pytest.approx(0.2)
+    phases = [dict(name="destination", n_episodes=2, sigma=0.3, final_sigma=0.1), dict(name="mqi", replay_handling="relabel")]
+    model = DTDPG("MlpPolicy", PhasedPointEnv(), phases=phases)
+    assert model.replay_buffer_class is RewardComponentsReplayBuffer
+    assert isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
+    assert noise_sigma_of(model) == 0.3
+    assert type(DTDPG("MlpPolicy", PhasedPointEnv(), replay_buffer_class=ReplayBuffer, phases=phases[:1]).replay_buffer) is (
+        ReplayBuffer
+    )
+
+
+def noise_sigma_of(model: DTDPG) -> float:
+    from sb3_dtdpg.common.noise import noise_sigma
+
+    return noise_sigma(model.action_noise)
+
+
+def test_learn_and_predict_shapes(tmp_path):
+    model = DTDPG("MlpPolicy", "Pendulum-v1", tensorboard_log=str(tmp_path), **TINY)
+    model.learn(120)
+    assert model.num_timesteps == 120
+    assert os.path.isdir(tmp_path / "DTDPG_1")
+    obs = model.env.observation_space.sample()
+    action, state = model.predict(obs, deterministic=True)
+    assert action.shape == (1,) and state is None
+    actions, _ = model.predict(np.stack([obs] * 5), deterministic=True)
+    assert actions.shape == (5, 1)
+    assert np.all(np.abs(actions) <= 2.0)
+
+
+def test_save_load(tmp_path):
+    model = DTDPG("MlpPolicy", "Pendulum-v1", seed=1, **TINY)
+    model.learn(450)  # two full episodes and a half
+    path = tmp_path / "dtdpg.zip"
+    model.save(path)
+    loaded = DTDPG.load(path, env=make_vec_env("Pendulum-v1"))
+    _assert_same_params(model, loaded)
+    # the running statistics of the batch norm layers are part of it
+    th.testing.assert_close(loaded.actor.mu[-2].running_var, model.actor.mu[-2].running_var, rtol=0, atol=0)
+    assert not th.allclose(loaded.actor.mu[-2].running_var, th.ones(1))
+    obs = np.random.default_rng(0).uniform(-1, 1, (10, 3)).astype(np.float32)
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+    # curriculum state and noise schedule
+    assert loaded.curriculum_state == model.curriculum_state
+    assert isinstance(loaded.action_noise, LinearDecayOUNoise)
+    assert loaded.action_noise.episode == model.action_noise.episode == 2
+    np.testing.assert_array_equal(loaded.action_noise.current_sigma, model.action_noise.current_sigma)
+    assert loaded.phases == model.phases
+    assert loaded.learning_rate == 1e-4 and loaded.tau == 0.002
+    # loaded model trains on
+    loaded.learn(60, reset_num_timesteps=False)
+    assert loaded.num_timesteps == 510
+
+
+def test_save_load_replay_buffer(tmp_path):
+    model = DTDPG("MlpPolicy", "Pendulum-v1", **TINY)
+    model.learn(100)
+    path = tmp_path / "buffer.pkl"
+    model.save_replay_buffer(path)
+    old = model.replay_buffer
+    model.replay_buffer = None
+    model.load_replay_buffer(path)
+    new = model.replay_buffer
+    assert new.pos == old.pos == 100
+    for name in ("observations", "actions", "rewards", "next_observations", "dones", "timeouts"):
+        np.testing.assert_array_equal(getattr(new, name), getattr(old, name))
+    model.learn(20, reset_num_timesteps=False)
+    assert model.replay_buffer.pos == 120
+
+
+def test_set_env_and_continue():
+    model = DTDPG("MlpPolicy", "Pendulum-v1", **TINY)
+    model.learn(60)
+    model.set_env(make_vec_env("Pendulum-v1", n_envs=1))
+    model.learn(40, reset_num_timesteps=False)
+    assert model.num_timesteps == 100
+    with pytest.raises(ValueError):
+        model.set_env(make_vec_env("MountainCarContinuous-v0"))
+
+
+def test_seeded_runs_are_identical():
+    runs = []
+    for _ in range(2):
+        model = DTDPG("MlpPolicy", "Pendulum-v1", seed=3, **TINY)
+        model.learn(300)
+        runs.append(model)
+    _assert_same_params(*runs)
+    other = DTDPG("MlpPolicy", "Pendulum-v1", seed=4, **TINY).learn(300)
+    assert not th.equal(_params(other)["policy.actor.mu.0.weight"], _params(runs[0])["policy.actor.mu.0.weight"])
+
+
+def test_two_envs_with_time_limit():
+    env = make_vec_env(_pendulum, n_envs=2, env_kwargs=dict(max_episode_steps=25))
+    model = DTDPG("MlpPolicy", env, **TINY)
+    model.learn(220)  # 110 steps per env: 4 episodes each
+    buffer = model.replay_buffer
+    assert buffer.n_envs == 2 and buffer.pos == 110
+    # every episode end is a truncation (Pendulum never terminates), stored as a timeout, not as a terminal state
+    assert buffer.dones[:110].sum() == 8
+    np.testing.assert_array_equal(buffer.timeouts[:110], buffer.dones[:110])
+    # the noise has one OU state per env and one schedule advanced by the episodes of both envs
+    noise = model.action_noise
+    assert isinstance(noise, VectorizedActionNoise) and len(noise.noises) == 2
+    assert noise.noises[0].episode == noise.noises[1].episode == 8
+    assert not np.array_equal(noise.noises[0].noise_prev, noise.noises[1].noise_prev)
+    assert model.curriculum_state["episodes_in_phase"] == 8
+
+
+def test_curriculum_runs_and_continues_across_learn_calls(tmp_path):
+    phases = [
+        Phase("destination", n_episodes=3, sigma=0.5, final_sigma=0.1),
+        Phase("mqi", sigma=0.4, final_sigma=0.2, decay_episodes=5),
+    ]
+    model = DTDPG("MlpPolicy", _phased(), phases=phases, curriculum_save_path=str(tmp_path), **TINY)
+    model.learn(50)  # 2 episodes of 20 steps and a half: still in phase 0
+    assert model.curriculum_state["phase_index"] == 0
+    assert model.get_env().get_attr("reward_phase") == ["destination"]
+    model.learn(40, reset_num_timesteps=False)  # the 3rd episode ends at step 60: transfer
+    assert model.curriculum_state["phase_index"] == 1
+    assert model.get_env().get_attr("reward_phase") == ["mqi"]
+    assert os.path.isfile(tmp_path / "phase_0_destination.zip")
+    # the new schedule counts the episode that ended at step 80, as the curriculum does
+    assert model.action_noise.episode == model.curriculum_state["episodes_in_phase"] == 1
+    np.testing.assert_array_equal(model.action_noise.current_sigma, np.full(3, 0.4 + (0.2 - 0.4) * 1 / 5))
+
+
+class _ModeRecorder(BaseCallback):
+    def _on_step(self) -> bool:
+        assert not self.model.policy.actor.training
+        return True
+
+
+def test_user_callbacks_are_combined():
+    calls = []
+    model = DTDPG("MlpPolicy", "Pendulum-v1", **TINY)
+    model.learn(60, callback=[_ModeRecorder(), lambda _locals, _globals: calls.append(1) or True])
+    assert len(calls) == 60
+    assert model.curriculum_state["phase_index"] == 0
