@@ -24,7 +24,8 @@ class DTDPG(DDPG):
     """
     Deep Transfer Deterministic Policy Gradient (DT-DPG).
 
-    Paper: W. Zhong, ..., "Path Design and Resource Management for NOMA enhanced Indoor Intelligent Robots"
+    Paper: R. Zhong, X. Liu, Y. Liu, Y. Chen, X. Wang,
+    "Path Design and Resource Management for NOMA enhanced Indoor Intelligent Robots"
     (Section IV, Algorithm 1; hyperparameters in Section V, Table I).
 
     DDPG with three changes: batch-normalised actor and critic (:class:`~sb3_dtdpg.dtdpg.policies.DTDPGPolicy`),
