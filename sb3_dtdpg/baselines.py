@@ -1,0 +1,153 @@
+"""The algorithm set compared on the mission environments (SPEC 4).
+
+``make_env`` and ``make_model`` build every algorithm the same way, so that a comparison differs only
+in the algorithm:
+
+- ``"dtdpg"``: :class:`sb3_dtdpg.DTDPG` with its defaults (paper Table I) and its two reward phases,
+  "destination" then "mqi" (the env starts in "destination"; the curriculum switches it).
+- ``"ddpg"``: plain SB3 ``DDPG``, the paper's comparison: a plain MLP of DT-DPG's sizes (no batch norm),
+  *constant* OU noise of scale 0.5 (DT-DPG's initial scale, Table I), the ``"combined"`` reward (the
+  paper's "contaminated" reward: inducing + QoS at once) and otherwise DT-DPG's hyperparameters
+  (learning rate 1e-4, batch 64, tau 0.002, buffer 5e4, gamma 0.99).
+- ``"td3"``, ``"sac"`` (SB3) and ``"tqc"`` (sb3-contrib): the stronger learners a reviewer asks about,
+  with SB3's defaults, the ``"combined"`` reward and, for TD3, Gaussian action noise of scale 0.1 (the RL
+  Zoo's usual setting; SB3's TD3 has no exploration noise by default). Nothing else is tuned.
+
+Every algorithm runs in NOMA and OMA mode (``multiple_access``) and gets the same budget (episodes).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import noma_radiomap  # noqa: F401  (registers the env ids)
+import numpy as np
+from sb3_contrib import TQC
+from stable_baselines3 import DDPG, SAC, TD3
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+
+from sb3_dtdpg.common.phases import default_phases
+from sb3_dtdpg.dtdpg.dtdpg import DTDPG
+
+__all__ = ["ALGORITHMS", "DEFAULT_ENV_ID", "algorithm_class", "make_env", "make_model", "mission_callbacks", "reward_phase"]
+
+ALGORITHMS: tuple[str, ...] = ("dtdpg", "ddpg", "td3", "sac", "tqc")
+DEFAULT_ENV_ID = "NomaRadioMap-v0"
+_CLASSES: dict[str, type[BaseAlgorithm]] = {"dtdpg": DTDPG, "ddpg": DDPG, "td3": TD3, "sac": SAC, "tqc": TQC}
+#: DT-DPG's hyperparameters (paper Table I) that plain DDPG shares, so that only the method differs.
+DDPG_KWARGS: dict[str, Any] = {
+    "learning_rate": 1e-4,
+    "buffer_size": 50_000,
+    "batch_size": 64,
+    "tau": 0.002,
+    "gamma": 0.99,
+    "policy_kwargs": {"net_arch": [128, 64]},
+}
+#: Scale of DDPG's constant OU noise: DT-DPG's initial scale xi(0, 0) (Table I).
+DDPG_OU_SIGMA = 0.5
+#: Scale of TD3's Gaussian exploration noise (the RL Zoo's usual value).
+TD3_NOISE_SIGMA = 0.1
+
+
+def _check_algo(algo: str) -> str:
+    if algo not in ALGORITHMS:
+        raise ValueError(f"algo must be one of {ALGORITHMS}, got {algo!r}")
+    return algo
+
+
+def algorithm_class(algo: str) -> type[BaseAlgorithm]:
+    """
+    :param algo: one of :data:`ALGORITHMS`
+    :return: the SB3 class of the algorithm (to ``load`` a saved model)
+    """
+    return _CLASSES[_check_algo(algo)]
+
+
+def reward_phase(algo: str) -> str:
+    """
+    :param algo: one of :data:`ALGORITHMS`
+    :return: the env reward phase the algorithm starts in (DT-DPG's curriculum then switches it)
+    """
+    return "destination" if _check_algo(algo) == "dtdpg" else "combined"
+
+
+def make_env(
+    algo: str,
+    env_id: str = DEFAULT_ENV_ID,
+    multiple_access: str = "noma",
+    channel: str = "radio_map",
+    env_kwargs: dict[str, Any] | None = None,
+) -> gym.Env:
+    """
+    The training env of an algorithm: ``env_id`` in the requested mode, starting in the algorithm's
+    reward phase, wrapped in a ``Monitor`` (episode returns and ``is_success`` for SB3's logger).
+
+    :param algo: one of :data:`ALGORITHMS`
+    :param env_id: a registered mission env id
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :param channel: ``"radio_map"`` (the paper's training) or ``"rayleigh"`` ("reality" training)
+    :param env_kwargs: extra ``gymnasium.make`` keyword arguments (e.g. ``scenario``)
+    :return: the env
+    """
+    kwargs = {"multiple_access": multiple_access, "channel": channel, **(env_kwargs or {})}
+    kwargs["reward_phase"] = reward_phase(algo)
+    return Monitor(gym.make(env_id, **kwargs), info_keywords=("is_success",))
+
+
+def make_model(
+    algo: str,
+    env: gym.Env,
+    seed: int | None = None,
+    tensorboard_log: str | None = None,
+    learning_rate: float | None = None,
+    destination_episodes: int | None = None,
+    verbose: int = 0,
+    **kwargs: Any,
+) -> BaseAlgorithm:
+    """
+    Build an algorithm of the set with its documented settings (see the module docstring).
+
+    :param algo: one of :data:`ALGORITHMS`
+    :param env: the training env (see :func:`make_env`; its reward phase must match the algorithm's)
+    :param seed: seed of the model (and of its env)
+    :param tensorboard_log: TensorBoard log folder (None: no logging)
+    :param learning_rate: overrides the algorithm's learning rate (the paper's two-learning-rate experiment)
+    :param destination_episodes: DT-DPG only: the episode budget of the destination phase (None: DTDPG's default)
+    :param verbose: SB3 verbosity
+    :param kwargs: further constructor arguments, passed on as is
+    :return: the (untrained) model
+    """
+    algo = _check_algo(algo)
+    n_actions = int(np.prod(env.action_space.shape))
+    options: dict[str, Any] = {}
+    if algo == "dtdpg":
+        if destination_episodes is not None:
+            options["phases"] = default_phases(destination_episodes=destination_episodes)
+    elif destination_episodes is not None:
+        raise ValueError(f"destination_episodes applies to 'dtdpg' only, got algo={algo!r}")
+    if algo == "ddpg":
+        options.update(DDPG_KWARGS)
+        options["action_noise"] = OrnsteinUhlenbeckActionNoise(np.zeros(n_actions), DDPG_OU_SIGMA * np.ones(n_actions))
+    elif algo == "td3":
+        options["action_noise"] = NormalActionNoise(np.zeros(n_actions), TD3_NOISE_SIGMA * np.ones(n_actions))
+    if learning_rate is not None:
+        options["learning_rate"] = learning_rate
+    options.update(kwargs)
+    return _CLASSES[algo]("MlpPolicy", env, seed=seed, tensorboard_log=tensorboard_log, verbose=verbose, **options)
+
+
+def mission_callbacks(model: BaseAlgorithm) -> list[BaseCallback]:
+    """
+    Callbacks to pass to ``learn`` so that every algorithm logs the same ``mission/*`` scalars
+    (DT-DPG adds its mission logger itself).
+
+    :param model: a model built by :func:`make_model`
+    :return: the callbacks
+    """
+    from sb3_dtdpg.common.callbacks import MissionLoggerCallback
+
+    return [] if isinstance(model, DTDPG) else [MissionLoggerCallback()]

@@ -1,0 +1,200 @@
+"""``sb3-dtdpg compare``: the main job — DT-DPG vs DDPG (and any other algorithm), NOMA and OMA, several seeds.
+
+All runs log under one TensorBoard folder, ``<out>/tb/<algo>_<mode>_s<seed>``, so
+``tensorboard --logdir <out>/tb`` shows them side by side. The job then writes ``results.md`` /
+``results.csv`` (one row per algorithm and mode, with the planners as reference rows),
+``results_runs.csv`` (one row per run), ``learning_curves.png`` and ``trajectories.png``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from sb3_dtdpg.experiments.runs import BUDGETS, Budget, RunSpec, load_result, run_many
+
+__all__ = ["compare_specs", "evaluate_planners", "run_compare"]
+
+PLANNERS = {
+    "comm-aware planner": "CommAwarePlanner",
+    "shortest-path planner": "ShortestPathPlanner",
+    "random": "RandomPlanner",
+}
+
+
+def compare_specs(
+    budget: Budget,
+    seeds: int,
+    algos: Sequence[str] = ("dtdpg", "ddpg"),
+    modes: Sequence[str] = ("noma", "oma"),
+    env_id: str = "NomaRadioMap-v0",
+) -> list[RunSpec]:
+    """:return: the runs of a comparison (every algorithm x mode x seed, trained on the radio map)"""
+    return [
+        RunSpec(
+            algo,
+            mode,
+            seed,
+            budget.episodes,
+            env_id=env_id,
+            scenario=budget.scenario,
+            eval_episodes=budget.eval_episodes,
+            eval_before_transfer=False,
+        )
+        for algo in algos
+        for mode in modes
+        for seed in range(seeds)
+    ]
+
+
+def evaluate_planners(
+    modes: Sequence[str],
+    budget: Budget,
+    env_id: str = "NomaRadioMap-v0",
+    eval_seed: int = 10_000,
+    eval_channel: str = "rayleigh",
+) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
+    """
+    Evaluate the non-learning references on the learners' test missions.
+
+    :return: the table rows and, per mode, the planners' first test trajectory
+    """
+    from noma_radiomap import planners
+
+    from sb3_dtdpg.evaluation import evaluate
+    from sb3_dtdpg.experiments.tables import planner_row
+
+    rows, trajectories = [], {}
+    env_kwargs = {} if budget.scenario is None else {"scenario": budget.scenario}
+    for mode in modes:
+        trajectories[mode] = {}
+        for name, cls in PLANNERS.items():
+            planner = getattr(planners, cls)(**({"seed": eval_seed} if cls == "RandomPlanner" else {}))
+            result = evaluate(
+                planner,
+                env_id,
+                n_episodes=budget.eval_episodes,
+                seed=eval_seed,
+                channel=eval_channel,
+                multiple_access=mode,
+                env_kwargs=env_kwargs,
+                return_trajectories=True,
+            )
+            rows.append(planner_row(name, mode, result))
+            trajectories[mode][name] = result.trajectories[0]
+    return rows, trajectories
+
+
+def run_compare(
+    out: str | Path = "results/compare",
+    budget: str | Budget = "default",
+    seeds: int | None = None,
+    algos: Sequence[str] = ("dtdpg", "ddpg"),
+    modes: Sequence[str] = ("noma", "oma"),
+    n_workers: int | None = None,
+    progress: bool = True,
+    env_id: str = "NomaRadioMap-v0",
+    scenario: str | None = None,
+) -> pd.DataFrame:
+    """
+    Train and evaluate every algorithm x mode x seed (finished runs are kept), then write the tables and figures.
+
+    :param out: output folder
+    :param budget: a name of :data:`~sb3_dtdpg.experiments.runs.BUDGETS` or a :class:`Budget`
+    :param seeds: seeds per configuration (default: the budget's)
+    :param algos: algorithms (see :data:`sb3_dtdpg.baselines.ALGORITHMS`)
+    :param modes: multiple-access modes
+    :param n_workers: parallel processes (default: the number of CPUs)
+    :param progress: show progress bars and print the table
+    :param env_id: the env id
+    :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
+    :return: the summary table (learners and planners)
+    """
+    from sb3_dtdpg.baselines import ALGORITHMS
+    from sb3_dtdpg.experiments import plots, tables
+
+    budget = _budget(budget)
+    if scenario is not None:
+        budget = dataclasses.replace(budget, scenario=scenario)
+    unknown = [a for a in algos if a not in ALGORITHMS]
+    if unknown:
+        raise ValueError(f"algos: unknown algorithm(s) {unknown}, expected some of {ALGORITHMS}")
+    bad_modes = [m for m in modes if m not in ("noma", "oma")]
+    if bad_modes:
+        raise ValueError(f"modes: expected 'noma' and/or 'oma', got {bad_modes}")
+    seeds = budget.seeds if seeds is None else seeds
+    if seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds!r}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    specs = compare_specs(budget, seeds, algos, modes, env_id)
+    report = run_many(specs, out, n_workers=n_workers, progress=progress)
+    for run_id, error in report.failed.items():
+        print(f"run {run_id} failed: {error}")
+
+    results = {spec.run_id: load_result(out, spec) for spec in specs}
+    finished = [r for r in results.values() if r is not None]
+    records = tables.run_records(finished)
+    summary = tables.summarise(records) if not records.empty else pd.DataFrame()
+    planner_rows, planner_paths = evaluate_planners(modes, budget, env_id)
+    summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
+    title = (
+        f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes, "
+        f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds)"
+    )
+    tables.save_tables(summary, records, out, "results", title)
+    if progress:
+        tables.print_table(summary, title)
+
+    groups: dict[str, list[Path]] = {}
+    for spec in specs:
+        if results[spec.run_id] is not None:
+            groups.setdefault(f"{tables.ALGO_LABELS[spec.algo]} {spec.multiple_access.upper()}", []).append(
+                out / "tb" / spec.run_id
+            )
+    if groups:
+        plots.plot_learning_curves(groups, out / "learning_curves.png", title="Learning curves (mean and 95 % CI over seeds)")
+    panels: dict[str, dict[str, Any]] = {}
+    goals: dict[str, Any] = {}
+    for mode in modes:
+        panel = {}
+        for algo in algos:
+            first = next(
+                (
+                    results[s.run_id]
+                    for s in specs
+                    if s.algo == algo and s.multiple_access == mode and results[s.run_id] is not None
+                ),
+                None,
+            )
+            if first is not None and first["eval"]["trajectories"]:
+                panel[f"{tables.ALGO_LABELS[algo]} (seed {first['spec']['seed']})"] = first["eval"]["trajectories"][0]
+                goals[mode.upper()] = plots.episode_destinations(first["eval"]["episodes"][0])
+        panel["comm-aware planner"] = planner_paths[mode]["comm-aware planner"]
+        panels[mode.upper()] = panel
+    plots.plot_trajectories(
+        budget.scenario or "mall",
+        panels,
+        out / "trajectories.png",
+        title="Test episode 0 (same mission and fading for every policy)",
+        destinations=goals,
+    )
+    if progress:
+        print(
+            f"wrote {out}/results.md, results.csv, results_runs.csv, learning_curves.png, trajectories.png; "
+            f"TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for {len(report.finished)} runs, "
+            f"{len(report.skipped)} already done)"
+        )
+    return summary
+
+
+def _budget(budget: str | Budget) -> Budget:
+    if isinstance(budget, Budget):
+        return budget
+    if budget not in BUDGETS:
+        raise ValueError(f"budget must be one of {sorted(k for k in BUDGETS if not k.startswith('_'))}, got {budget!r}")
+    return BUDGETS[budget]

@@ -1,0 +1,280 @@
+"""``sb3-dtdpg reproduce``: every experiment of the paper's Section V (SPEC section 5), resumable.
+
+Runs (per seed; ``E`` and ``L`` are the budget's ``episodes`` and ``long_episodes``, 500 and 700 in the paper):
+
+- Table II: DT-DPG in NOMA and OMA, trained on the radio map for ``E`` episodes and in "reality"
+  (Rayleigh fading) for ``E`` and ``L`` episodes, tested on 20 Rayleigh episodes;
+- DDPG vs DT-DPG: plain DDPG in NOMA and OMA, radio map, ``E`` episodes (success rate and MQI);
+- the two learning rates: DT-DPG at 1e-3 besides the default 1e-4 (paper Fig. 6), NOMA and OMA.
+
+Figures: the power and SINR maps, trajectories NOMA vs OMA and before/after the transfer, reward per
+episode in both phases for the two learning rates, MQI per episode (the dip at the transfer) and
+DDPG vs DT-DPG. A run whose result file exists is not re-run, so the job can be interrupted and resumed.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from sb3_dtdpg.evaluation import mean_ci
+from sb3_dtdpg.experiments.compare import _budget, evaluate_planners
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, load_result, run_many
+
+__all__ = ["PAPER_TABLE_II", "reproduce_specs", "run_reproduce"]
+
+#: Paper Table II: (MA mode, approach, training episodes) -> MQI over 20 Rayleigh test episodes.
+PAPER_TABLE_II: dict[tuple[str, str, str], float] = {
+    ("OMA", "radio map", "E"): 879.5,
+    ("OMA", "reality", "E"): 868.5,
+    ("OMA", "reality", "L"): 876.2,
+    ("NOMA", "radio map", "E"): 929.0,
+    ("NOMA", "reality", "E"): 919.0,
+    ("NOMA", "reality", "L"): 929.0,
+}
+HIGH_LEARNING_RATE = 1e-3
+
+
+def _spec(budget: Budget, algo: str, mode: str, seed: int, channel: str, episodes: int, lr: float | None = None) -> RunSpec:
+    tag = f"{'radio_map' if channel == 'radio_map' else 'reality'}_{episodes}" + (f"_lr{lr:g}" if lr is not None else "")
+    return RunSpec(
+        algo,
+        mode,
+        seed,
+        episodes,
+        channel=channel,
+        learning_rate=lr,
+        scenario=budget.scenario,
+        eval_episodes=budget.eval_episodes,
+        tag=tag,
+    )
+
+
+def reproduce_specs(budget: Budget, seeds: int) -> dict[str, list[RunSpec]]:
+    """:return: the runs of every experiment, by experiment (a run may serve several experiments)"""
+    e, long = budget.episodes, budget.long_episodes
+    modes = ("noma", "oma")
+    table = [
+        _spec(budget, "dtdpg", m, s, c, n)
+        for m in modes
+        for c, n in (("radio_map", e), ("rayleigh", e), ("rayleigh", long))
+        for s in range(seeds)
+    ]
+    ddpg = [_spec(budget, "ddpg", m, s, "radio_map", e) for m in modes for s in range(seeds)]
+    dtdpg = [_spec(budget, "dtdpg", m, s, "radio_map", e) for m in modes for s in range(seeds)]
+    lrs = [_spec(budget, "dtdpg", m, s, "radio_map", e, HIGH_LEARNING_RATE) for m in modes for s in range(seeds)]
+    return {"ddpg_vs_dtdpg": dtdpg + ddpg, "table_ii": table, "learning_rates": dtdpg + lrs}
+
+
+def _approach(spec: dict[str, Any], budget: Budget) -> tuple[str, str]:
+    approach = "radio map" if spec["channel"] == "radio_map" else "reality"
+    return approach, "E" if spec["episodes"] == budget.episodes else "L"
+
+
+def _dip(log_dir: Path, window: int = 10) -> dict[str, float]:
+    """
+    Mean MQI per episode over the ``window`` episodes before the transfer, the ``window`` episodes right
+    after it, and the last ``window`` episodes of training (plain means over equal windows: the minimum of
+    a noisy curve after the transfer would be biased low).
+    """
+    from sb3_dtdpg.experiments.plots import episode_curves, transfer_episode
+
+    episode = transfer_episode(log_dir)
+    curve = episode_curves(log_dir, ["mission/mqi"]).get("mission/mqi")
+    if episode is None or curve is None or curve.empty:
+        return {"transfer_episode": math.nan, "before": math.nan, "after": math.nan, "final": math.nan}
+    curve = curve.dropna()
+    before = curve[curve.index < episode].tail(window)
+    after = curve[curve.index >= episode].head(window)
+    return {
+        "transfer_episode": episode,
+        "before": float(before.mean()) if len(before) else math.nan,
+        "after": float(after.mean()) if len(after) else math.nan,
+        "final": float(curve.tail(window).mean()),
+    }
+
+
+def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[str, Any]) -> pd.DataFrame | None:
+    """MQI before and right after the transfer and at the end, per DT-DPG configuration (mean and CI over seeds)."""
+    dips = []
+    for spec in experiments["learning_rates"]:
+        if results[spec.run_id] is not None:
+            dips.append({"group": spec.group, "seed": spec.seed, **_dip(out / "tb" / spec.run_id)})
+    if not dips:
+        return None
+    rows = []
+    for group, part in pd.DataFrame(dips).groupby("group", sort=False):
+        row: dict[str, Any] = {"group": group, "n": len(part)}
+        for key in ("transfer_episode", "before", "after", "final"):
+            row[key], row[f"{key}_ci"] = mean_ci(part[key].dropna().to_numpy())
+        rows.append(row)
+    dip = pd.DataFrame(rows)
+    dip.to_csv(out / "transfer_dip.csv", index=False)
+    return dip
+
+
+def run_reproduce(
+    out: str | Path = "results/reproduce",
+    budget: str | Budget = "paper",
+    seeds: int | None = None,
+    n_workers: int | None = None,
+    progress: bool = True,
+    train: bool = True,
+) -> dict[str, pd.DataFrame]:
+    """
+    Run (or resume) every experiment and write its tables (Markdown + CSV) and figures under ``out``.
+
+    :param out: output folder
+    :param budget: a budget name or :class:`~sb3_dtdpg.experiments.runs.Budget`
+    :param seeds: seeds per configuration (default: the budget's)
+    :param n_workers: parallel processes (default: the number of CPUs)
+    :param progress: progress bars and printed tables
+    :param train: run the unfinished runs; False only re-draws the tables and figures from the finished ones
+    :return: the tables, by name
+    """
+    from sb3_dtdpg.experiments import tables
+
+    budget = _budget(budget)
+    seeds = budget.seeds if seeds is None else seeds
+    if seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds!r}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    experiments = reproduce_specs(budget, seeds)
+    unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
+    # Seed by seed, so that an interrupted job has whole seeds of every experiment.
+    unique.sort(key=lambda spec: spec.seed)
+    if train:
+        report = run_many(unique, out, n_workers=n_workers, progress=progress)
+        for run_id, error in report.failed.items():
+            print(f"run {run_id} failed: {error}")
+    results = {spec.run_id: load_result(out, spec) for spec in unique}
+
+    def records(name: str) -> pd.DataFrame:
+        return tables.run_records([results[s.run_id] for s in experiments[name] if results[s.run_id] is not None])
+
+    out_tables: dict[str, pd.DataFrame] = {}
+    # Table II.
+    rec = records("table_ii")
+    if not rec.empty:
+        summary = tables.summarise(rec, by=("multiple_access", "training", "episodes"))
+        summary["approach"] = ["radio map" if t == "radio_map" else "reality" for t in summary["training"]]
+        summary["paper_mqi"] = [
+            PAPER_TABLE_II.get((m, a, "E" if n == budget.episodes else "L"), math.nan)
+            for m, a, n in zip(summary["multiple_access"], summary["approach"], summary["episodes"], strict=False)
+        ]
+        summary = summary.sort_values(["multiple_access", "training", "episodes"], ascending=[False, True, True])
+        tables.save_tables(
+            summary,
+            rec,
+            out,
+            "table_ii",
+            f"Table II: DT-DPG test MQI ({budget.name} budget)",
+            columns=("multiple_access", "approach", "episodes"),
+        )
+        out_tables["table_ii"] = summary
+        if progress:
+            tables.print_table(summary, "Table II (DT-DPG)", columns=("multiple_access", "approach", "episodes"))
+    # DDPG vs DT-DPG.
+    rec = records("ddpg_vs_dtdpg")
+    if not rec.empty:
+        summary = tables.summarise(rec)
+        planner_rows, _ = evaluate_planners(("noma", "oma"), budget)
+        summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
+        tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", f"DDPG vs DT-DPG ({budget.name} budget, radio-map training)")
+        out_tables["ddpg_vs_dtdpg"] = summary
+        if progress:
+            tables.print_table(summary, "DDPG vs DT-DPG")
+    # Learning rates.
+    rec = records("learning_rates")
+    if not rec.empty:
+        rec["learning_rate"] = rec["learning_rate"].fillna(1e-4)
+        summary = tables.summarise(rec, by=("multiple_access", "learning_rate"))
+        tables.save_tables(
+            summary,
+            rec,
+            out,
+            "learning_rates",
+            f"DT-DPG with two learning rates ({budget.name} budget)",
+            columns=("multiple_access", "learning_rate"),
+        )
+        out_tables["learning_rates"] = summary
+        if progress:
+            tables.print_table(summary, "Learning rates (DT-DPG)", columns=("multiple_access", "learning_rate"))
+    dip = _dip_table(out, experiments, results)
+    if dip is not None:
+        out_tables["transfer_dip"] = dip
+    _figures(out, budget, experiments, results)
+    return out_tables
+
+
+def _figures(out: Path, budget: Budget, experiments: dict[str, list[RunSpec]], results: dict[str, Any]) -> None:
+    from noma_radiomap import RadioMap, load_scenario
+
+    from sb3_dtdpg.experiments import plots
+
+    scenario = load_scenario(budget.scenario or "mall")
+    RadioMap.for_scenario(scenario).plot_maps(str(out / "fig_maps.png"))
+
+    def dirs(name: str, **match: Any) -> dict[str, list[Path]]:
+        groups: dict[str, list[Path]] = {}
+        for spec in experiments[name]:
+            if results[spec.run_id] is not None and all(getattr(spec, k) == v for k, v in match.items()):
+                label = f"{spec.algo.upper().replace('DTDPG', 'DT-DPG')} {spec.multiple_access.upper()}"
+                label += f" lr={spec.learning_rate or 1e-4:g}" if name == "learning_rates" else ""
+                groups.setdefault(label, []).append(out / "tb" / spec.run_id)
+        return groups
+
+    if groups := dirs("learning_rates"):
+        plots.plot_learning_curves(
+            groups,
+            out / "fig_reward_learning_rates.png",
+            tags=(("episode/return", "reward per episode (phase reward)"),),
+            smooth=5,
+            title="DT-DPG reward per episode, two learning rates (dotted: transfer)",
+        )
+        plots.plot_learning_curves(
+            groups,
+            out / "fig_mqi_per_episode.png",
+            tags=(("mission/mqi", "MQI per episode"),),
+            smooth=5,
+            title="DT-DPG MQI per episode (dotted: transfer to MQI training)",
+        )
+    if groups := dirs("ddpg_vs_dtdpg"):
+        plots.plot_learning_curves(groups, out / "fig_ddpg_vs_dtdpg.png", title="DDPG vs DT-DPG (radio-map training)")
+    first = {}
+    for spec in experiments["ddpg_vs_dtdpg"]:
+        result = results[spec.run_id]
+        if spec.algo == "dtdpg" and result is not None and spec.multiple_access not in first:
+            first[spec.multiple_access] = result
+    panels = {mode.upper(): {"DT-DPG": r["eval"]["trajectories"][0]} for mode, r in first.items() if r["eval"]["trajectories"]}
+    goals = {
+        mode.upper(): plots.episode_destinations(r["eval"]["episodes"][0]) if r["eval"]["episodes"] else None
+        for mode, r in first.items()
+    }
+    if panels:
+        plots.plot_trajectories(
+            scenario,
+            panels,
+            out / "fig_trajectories_noma_oma.png",
+            title="DT-DPG trajectories, NOMA vs OMA (test episode 0)",
+            destinations=goals,
+        )
+    transfer = {}
+    for mode, result in first.items():
+        if "before_transfer" in result and result["before_transfer"]["trajectories"]:
+            transfer[mode.upper()] = {
+                "before transfer": result["before_transfer"]["trajectories"][0],
+                "after transfer": result["eval"]["trajectories"][0],
+            }
+    if transfer:
+        plots.plot_trajectories(
+            scenario,
+            transfer,
+            out / "fig_trajectories_transfer.png",
+            title="DT-DPG trajectories before/after the transfer (test episode 0)",
+            destinations=goals,
+        )

@@ -1,0 +1,57 @@
+"""The algorithm set (sb3_dtdpg.baselines): every algorithm in NOMA and OMA, with its documented settings."""
+
+import numpy as np
+import pytest
+import torch as th
+from sb3_contrib import TQC
+from stable_baselines3 import DDPG, SAC, TD3
+from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+
+from sb3_dtdpg import DTDPG
+from sb3_dtdpg.baselines import ALGORITHMS, DDPG_OU_SIGMA, algorithm_class, make_env, make_model, reward_phase
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+@pytest.mark.parametrize("multiple_access", ["noma", "oma"])
+def test_every_algorithm_trains_in_both_modes(algo, multiple_access):
+    env = make_env(algo, multiple_access=multiple_access, env_kwargs={"scenario": "small"})
+    assert env.unwrapped.multiple_access == multiple_access
+    assert env.unwrapped.reward_phase == reward_phase(algo)
+    model = make_model(algo, env, seed=0, learning_starts=10, batch_size=8)
+    assert isinstance(model, algorithm_class(algo))
+    model.learn(30)
+    assert model.num_timesteps == 30
+    action, _ = model.predict(env.observation_space.sample(), deterministic=True)
+    assert env.action_space.contains(action)
+
+
+def test_ddpg_is_the_papers_plain_baseline():
+    env = make_env("ddpg", env_kwargs={"scenario": "small"})
+    model = make_model("ddpg", env, seed=0)
+    assert type(model) is DDPG and not isinstance(model, DTDPG)
+    assert env.unwrapped.reward_phase == "combined"
+    # Plain MLP (no batch norm), DT-DPG's sizes and Table I hyperparameters, constant OU noise.
+    assert not any(isinstance(m, th.nn.BatchNorm1d) for m in model.policy.modules())
+    assert (model.learning_rate, model.batch_size, model.tau, model.buffer_size) == (1e-4, 64, 0.002, 50_000)
+    assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
+    np.testing.assert_allclose(model.action_noise._sigma, DDPG_OU_SIGMA)
+
+
+def test_dtdpg_starts_in_the_destination_phase_and_others_use_the_combined_reward():
+    assert reward_phase("dtdpg") == "destination"
+    assert {reward_phase(a) for a in ALGORITHMS if a != "dtdpg"} == {"combined"}
+    td3 = make_model("td3", make_env("td3", env_kwargs={"scenario": "small"}))
+    assert isinstance(td3.action_noise, NormalActionNoise)
+    assert type(make_model("sac", make_env("sac", env_kwargs={"scenario": "small"}))) is SAC
+    assert type(make_model("tqc", make_env("tqc", env_kwargs={"scenario": "small"}))) is TQC
+    assert type(td3) is TD3
+
+
+def test_options_are_validated():
+    with pytest.raises(ValueError, match="algo must be one of"):
+        make_env("ppo")
+    with pytest.raises(ValueError, match="destination_episodes"):
+        make_model("ddpg", make_env("ddpg", env_kwargs={"scenario": "small"}), destination_episodes=10)
+    model = make_model("dtdpg", make_env("dtdpg", env_kwargs={"scenario": "small"}), destination_episodes=7)
+    assert model.phases[0].n_episodes == 7 and model.phases[0].reward_phase == "destination"
+    assert make_model("dtdpg", make_env("dtdpg", env_kwargs={"scenario": "small"}), learning_rate=1e-3).learning_rate == 1e-3

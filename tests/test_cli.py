@@ -1,0 +1,131 @@
+"""The ``sb3-dtdpg`` command line: compare writes its table, CSV, figures and event files; reproduce resumes."""
+
+import dataclasses
+import json
+
+import pandas as pd
+import pytest
+from tbparse import SummaryReader
+
+from sb3_dtdpg.cli import main
+from sb3_dtdpg.experiments.compare import compare_specs
+from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
+from sb3_dtdpg.experiments.runs import BUDGETS, result_path
+
+# tbparse 0.0.9 sorts with pandas' deprecated `inplace=True`.
+pytestmark = pytest.mark.filterwarnings("ignore:The inplace keyword:DeprecationWarning", "ignore::FutureWarning")
+
+MICRO = BUDGETS["_micro"]  # 3 training episodes on `small`: the pipeline, not the learning
+
+
+@pytest.fixture(autouse=True)
+def _agg_backend(monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+
+
+def test_compare_writes_table_csv_figures_and_event_files(tmp_path, capsys):
+    assert main(["compare", "--budget", "_micro", "--seeds", "2", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "DT-DPG" in printed and "DDPG" in printed and "comm-aware planner" in printed
+    for name in ("results.md", "results.csv", "results_runs.csv", "learning_curves.png", "trajectories.png"):
+        assert (tmp_path / name).stat().st_size > 0, name
+
+    summary = pd.read_csv(tmp_path / "results.csv")
+    learners = summary[summary["ci_over"] == "seeds"]
+    assert sorted(zip(learners["algorithm"], learners["multiple_access"], strict=True)) == [
+        ("DDPG", "NOMA"),
+        ("DDPG", "OMA"),
+        ("DT-DPG", "NOMA"),
+        ("DT-DPG", "OMA"),
+    ]
+    assert (learners["n"] == 2).all()
+    planners = summary[summary["ci_over"] == "episodes"].set_index(["algorithm", "multiple_access"])
+    assert planners.loc[("comm-aware planner", "NOMA"), "success_rate"] == 1.0
+    markdown = (tmp_path / "results.md").read_text()
+    assert markdown.count("\n| ") == len(summary) + 1  # header + one line per row
+
+    runs = pd.read_csv(tmp_path / "results_runs.csv")
+    specs = compare_specs(MICRO, 2)
+    assert len(runs) == len(specs) == 8
+    for spec in specs:
+        result = json.loads(result_path(tmp_path, spec).read_text())
+        assert result["train"]["episodes"] == MICRO.episodes
+        assert len(result["eval"]["episodes"]) == MICRO.eval_episodes
+        assert (tmp_path / "runs" / spec.run_id / "model.zip").exists()
+        tags = set(SummaryReader(str(tmp_path / "tb" / spec.run_id)).scalars["tag"])
+        assert {"mission/mqi", "mission/success_rate", "episode/number", "episode/return"} <= tags, spec.run_id
+        if spec.algo == "dtdpg":
+            assert "curriculum/phase" in tags
+
+
+def _fake_result(spec, mqi):
+    trajectory = [[[1.0, 1.0], [1.0, 6.0]], [[2.0, 2.0], [2.0, 6.0]]]
+    summary = {"n_episodes": 1.0, "success_rate": 1.0, "mqi": mqi, "outage_steps": 3.0, "mission_time": 9.0}
+    summary.update({f"{k}_ci": 0.0 for k in ("mqi", "outage_steps", "mission_time", "path_length", "episode_return")})
+    return {
+        "spec": dataclasses.asdict(spec),
+        "run_id": spec.run_id,
+        "group": spec.group,
+        "train": {"timesteps": 1, "episodes": 1, "wall_s": 1.0, "steps_per_s": 1.0},
+        "eval": {"summary": summary, "episodes": [], "trajectories": [trajectory]},
+    }
+
+
+def test_reproduce_skips_finished_runs(tmp_path):
+    experiments = reproduce_specs(MICRO, seeds=1)
+    unique = list({s.run_id: s for specs in experiments.values() for s in specs}.values())
+    assert len(unique) == 10  # Table II (2 modes x 3 trainings), DDPG (2 modes), the second learning rate (2 modes)
+    missing = next(s for s in unique if s.algo == "ddpg" and s.multiple_access == "oma")
+    finished = {}
+    for spec in unique:
+        if spec is not missing:
+            path = result_path(tmp_path, spec)
+            path.parent.mkdir(parents=True)
+            path.write_text(json.dumps(_fake_result(spec, mqi=12345.0)))
+            finished[path] = path.read_bytes()
+
+    # --report-only: tables from the finished runs, nothing trained.
+    report = run_reproduce(tmp_path, budget="_micro", seeds=1, progress=False, train=False)
+    assert not result_path(tmp_path, missing).exists()
+    assert ("DDPG", "OMA") not in set(
+        zip(*(report["ddpg_vs_dtdpg"][c] for c in ("algorithm", "multiple_access")), strict=True)
+    )
+
+    tables = run_reproduce(tmp_path, budget="_micro", seeds=1, progress=False)
+    for path, content in finished.items():
+        assert path.read_bytes() == content  # not re-run ...
+        assert not (path.parent / "model.zip").exists()  # ... nor re-trained
+    real = json.loads(result_path(tmp_path, missing).read_text())
+    assert real["train"]["episodes"] == MICRO.episodes and (tmp_path / "runs" / missing.run_id / "model.zip").exists()
+
+    assert (tables["table_ii"]["mqi"] == 12345.0).all()
+    assert set(tables["table_ii"]["paper_mqi"]) == {879.5, 868.5, 876.2, 929.0, 919.0}
+    comparison = tables["ddpg_vs_dtdpg"].set_index(["algorithm", "multiple_access"])
+    assert comparison.loc[("DDPG", "OMA"), "mqi"] == real["eval"]["summary"]["mqi"] != 12345.0
+    for name in ("table_ii.md", "ddpg_vs_dtdpg.md", "learning_rates.md", "fig_maps.png", "fig_trajectories_noma_oma.png"):
+        assert (tmp_path / name).exists(), name
+
+
+def test_map_and_train_commands(tmp_path):
+    assert main(["map", "--scenario", "small", "--out", str(tmp_path / "maps")]) == 0
+    assert (tmp_path / "maps" / "maps_small.png").stat().st_size > 0
+    args = ["train", "--algo", "ddpg", "--scenario", "small", "--episodes", "2", "--eval-episodes", "1", "--no-progress"]
+    assert main([*args, "--tb", str(tmp_path / "tb"), "--out", str(tmp_path / "models")]) == 0
+    assert (tmp_path / "models" / "ddpg_noma_s0.zip").exists()
+    events = list((tmp_path / "tb").rglob("events.out.tfevents*"))
+    assert events and "mission/mqi" in set(SummaryReader(str(events[0].parent)).scalars["tag"])
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["compare", "--budget", "huge"], "budget must be one of"),
+        (["compare", "--seeds", "0"], "positive integer"),
+        (["train", "--algo", "ppo"], "invalid choice"),
+    ],
+)
+def test_bad_arguments_are_rejected(argv, message, capsys):
+    with pytest.raises(SystemExit) as error:
+        main(argv)
+    assert error.value.code == 2
+    assert message in capsys.readouterr().err

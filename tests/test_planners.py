@@ -1,0 +1,111 @@
+"""Non-learning references (noma_radiomap.planners): they reach the destinations, and comm-awareness pays."""
+
+import itertools
+
+import gymnasium as gym
+import noma_radiomap  # noqa: F401
+import numpy as np
+import pytest
+from noma_radiomap.downlink import allocate_power, downlink, in_outage
+from noma_radiomap.planners import CommAwarePlanner, RandomPlanner, ShortestPathPlanner, channel_maps
+from noma_radiomap.propagation import dbm_to_watt
+
+from sb3_dtdpg.evaluation import evaluate
+
+
+def _start_corners(radio_map, robot):
+    """The free start cells at the corners of a robot's start region (the hardest starts for a path)."""
+    cells = radio_map.start_cells(robot)
+    picks = [cells[np.argmin(cells @ w)] for w in ([1, 1], [-1, 1], [1, -1], [-1, -1])]
+    return [radio_map.cell_center(*cell).tolist() for cell in picks]
+
+
+@pytest.mark.parametrize("planner_cls", [ShortestPathPlanner, CommAwarePlanner])
+@pytest.mark.parametrize("multiple_access", ["noma", "oma"])
+def test_planners_reach_every_destination_on_small(planner_cls, multiple_access):
+    env = gym.make("NomaRadioMap-v0", scenario="small", multiple_access=multiple_access)
+    scenario, radio_map = env.unwrapped.scenario, env.unwrapped.radio_map
+    destination_sets = list(itertools.product(*(robot.destinations for robot in scenario.robots)))
+    start_sets = list(zip(*(_start_corners(radio_map, u) for u in range(scenario.n_robots)), strict=True))
+    options = [{"starts": list(s), "destinations": [list(d) for d in ds]} for ds in destination_sets for s in start_sets]
+    result = evaluate(planner_cls(), env, n_episodes=len(options), options=options, channel="radio_map")
+    failed = [o for o, e in zip(options, result.episodes, strict=True) if not e["success"]]
+    assert not failed, f"{planner_cls.__name__} did not arrive on {failed}"
+    # Full speed on a clear path: the mission never takes far longer than the longest straight line.
+    longest = max(np.hypot(*np.subtract(s, d)) for o in options for s, d in zip(o["starts"], o["destinations"], strict=True))
+    assert max(e["mission_time"] for e in result.episodes) <= 1.6 * longest / scenario.robot.v_max
+
+
+@pytest.mark.parametrize("planner_cls", [ShortestPathPlanner, CommAwarePlanner])
+def test_planners_reach_sampled_missions_on_mall(planner_cls):
+    result = evaluate(planner_cls(), "NomaRadioMap-v0", n_episodes=6, seed=11, channel="rayleigh")
+    assert result.success_rate == 1.0
+
+
+def test_shortest_path_follows_the_geodesic():
+    env = gym.make("NomaRadioMap-v0")
+    radio_map, scenario = env.unwrapped.radio_map, env.unwrapped.scenario
+    result = evaluate(ShortestPathPlanner(), env, n_episodes=4, seed=5, channel="radio_map", return_trajectories=True)
+    for record, trajectory in zip(result.episodes, result.trajectories, strict=True):
+        for u in range(scenario.n_robots):
+            start, end = trajectory[0, u], trajectory[-1, u]
+            geodesic = radio_map.distance_field(end)[radio_map.cell_index(start)]
+            # The grid geodesic joins cell centres (up to a cell diagonal off the true points); the planner cuts
+            # the 8-connected staircase into straight lines, so it is never much longer.
+            assert record[f"path_length_{u}"] <= geodesic + scenario.room.resolution * np.sqrt(2) + 1e-6
+
+
+def test_comm_aware_mqi_beats_shortest_path_on_mall():
+    for multiple_access in ("noma", "oma"):
+        kwargs = {"n_episodes": 6, "seed": 100, "channel": "radio_map", "multiple_access": multiple_access}
+        shortest = evaluate(ShortestPathPlanner(), "NomaRadioMap-v0", **kwargs)
+        aware = evaluate(CommAwarePlanner(), "NomaRadioMap-v0", **kwargs)
+        assert aware.success_rate == shortest.success_rate == 1.0
+        assert aware.mqi_mean >= shortest.mqi_mean, multiple_access
+        assert aware.summary()["outage_steps"] <= shortest.summary()["outage_steps"], multiple_access
+
+
+@pytest.mark.parametrize("multiple_access", ["noma", "oma"])
+def test_comm_aware_power_never_has_more_outages_than_an_equal_split(multiple_access):
+    env = gym.make("NomaRadioMap-v0", multiple_access=multiple_access).unwrapped
+    env.reset(seed=0)
+    planner = CommAwarePlanner()
+    planner.reset(env)
+    gain, interference = channel_maps(env)
+    free = np.argwhere(~env.radio_map.blocked)
+    rng = np.random.default_rng(0)
+    radio, max_power_w = env.scenario.radio, float(dbm_to_watt(env.scenario.ap.max_power_dbm))
+    noise = float(dbm_to_watt(radio.noise_dbm_per_hz))
+    fewer = 0
+    for _ in range(200):
+        cells = free[rng.choice(len(free), size=2, replace=False)]
+        positions = env.radio_map.cell_center(cells[:, 0], cells[:, 1])
+        active = np.ones(2, dtype=bool)
+
+        def outages(actions, cells=cells):
+            power = allocate_power(np.asarray(actions, dtype=float), max_power_w)
+            g, i = gain[cells[:, 0], cells[:, 1]], interference[cells[:, 0], cells[:, 1]]
+            rate = downlink(power, g, i, radio.bandwidth_per_robot_hz, noise, multiple_access).rate_bps
+            return int(in_outage(rate, radio.qos_rate_bps).sum())
+
+        chosen = planner.power_actions(env, positions, active)
+        assert np.all(np.abs(chosen) <= 1.0)
+        assert outages(chosen) <= outages([0.0, 0.0])
+        fewer += outages(chosen) < outages([0.0, 0.0])
+    assert fewer > 0  # it does better than the equal split somewhere
+
+
+def test_random_planner_is_seeded_and_in_bounds():
+    env = gym.make("NomaRadioMap-v0", scenario="small").unwrapped
+    env.reset(seed=0)
+    a, b = RandomPlanner(seed=3), RandomPlanner(seed=3)
+    actions = np.stack([a.act(env, None) for _ in range(50)])
+    np.testing.assert_array_equal(actions, np.stack([b.act(env, None) for _ in range(50)]))
+    assert env.action_space.contains(actions[0]) and actions.std() > 0.3
+
+
+def test_comm_aware_levels_are_validated():
+    with pytest.raises(ValueError, match="levels"):
+        CommAwarePlanner(levels=1)
+    with pytest.raises(ValueError, match="lookahead"):
+        ShortestPathPlanner(lookahead=0)
