@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
+
 import noma_radiomap  # noqa: F401  (registers the ids)
 
 CASES: dict[str, tuple[str, dict]] = {

@@ -66,9 +66,9 @@ def _episode_recorder(bar_position: int, total: int, desc: str) -> Any:
 def run_phase1(seed: int, args: argparse.Namespace, slot: int) -> dict[str, Any]:
     """Train phase 1 until its transfer; keep the checkpoint and the replay buffer for the phase-2 branches."""
     import gymnasium as gym
-    import noma_radiomap  # noqa: F401  (registers the env)
     import torch as th
 
+    import noma_radiomap  # noqa: F401  (registers the env)
     from sb3_dtdpg import DTDPG
     from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
 
@@ -120,10 +120,10 @@ def _stop_at_phase(index: int) -> Any:
 def run_phase2(seed: int, handling: str, args: argparse.Namespace, slot: int) -> dict[str, Any]:
     """Continue from the phase-1 checkpoint with one replay handling; evaluate the final policy."""
     import gymnasium as gym
-    import noma_radiomap  # noqa: F401
     import torch as th
     from stable_baselines3.common.utils import set_random_seed
 
+    import noma_radiomap  # noqa: F401
     from sb3_dtdpg import DTDPG
     from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
     from sb3_dtdpg.evaluation import evaluate

@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
-import noma_radiomap  # noqa: F401
 import optuna
 
+import noma_radiomap  # noqa: F401
 from sb3_dtdpg.zoo import sample_dtdpg_params
 
 REPO = Path(__file__).resolve().parents[1]

@@ -12,10 +12,10 @@ episodes, or after 300 episodes). A small budget stays in the first phase.
 import argparse
 
 import gymnasium as gym
-import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)
 import numpy as np
 import torch as th
 
+import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)
 from sb3_dtdpg import DTDPG
 
 

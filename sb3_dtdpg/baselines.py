@@ -21,7 +21,6 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
-import noma_radiomap  # noqa: F401  (registers the env ids)
 import numpy as np
 from sb3_contrib import TQC
 from stable_baselines3 import DDPG, SAC, TD3
@@ -30,6 +29,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
+import noma_radiomap  # noqa: F401  (registers the env ids)
 from sb3_dtdpg.common.phases import default_phases
 from sb3_dtdpg.dtdpg.dtdpg import DTDPG
 

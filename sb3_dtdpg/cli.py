@@ -37,10 +37,10 @@ def _cmd_map(args: argparse.Namespace) -> int:
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    import noma_radiomap  # noqa: F401
     import torch as th
     from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
 
+    import noma_radiomap  # noqa: F401
     from sb3_dtdpg.baselines import make_env, make_model, mission_callbacks
     from sb3_dtdpg.evaluation import evaluate
     from sb3_dtdpg.experiments.runs import EpisodeReturnLogger

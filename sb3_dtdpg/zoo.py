@@ -14,12 +14,12 @@ Importing this module also imports :mod:`noma_radiomap`, so the NomaRadioMap env
 import dataclasses
 from typing import Any
 
-import noma_radiomap  # noqa: F401  (registers the NomaRadioMap env ids)
 import optuna
 import rl_zoo3
 import rl_zoo3.exp_manager
 from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
 
+import noma_radiomap  # noqa: F401  (registers the NomaRadioMap env ids)
 from sb3_dtdpg.common.phases import REPLAY_HANDLINGS, default_phases
 from sb3_dtdpg.dtdpg import DTDPG
 

@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+
 from noma_radiomap.downlink import (
     SINR_DB_FLOOR,
     allocate_power,

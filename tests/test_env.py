@@ -5,17 +5,18 @@ import pickle
 import warnings
 
 import gymnasium as gym
-import noma_radiomap
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+import noma_radiomap
 from noma_radiomap import NomaRadioMapEnv, RadioMap, Scenario, load_scenario
 from noma_radiomap.downlink import allocate_power, downlink
 from noma_radiomap.propagation import EXPECTED_FADING_DB, db_to_linear, dbm_to_watt
 from noma_radiomap.registration import ENV_IDS, MAX_EPISODE_STEPS, register_envs
-from stable_baselines3.common.env_checker import check_env as sb3_check_env
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 MODES = [(ma, ch) for ma in ("noma", "oma") for ch in ("radio_map", "rayleigh")]
 # Two free, mutually reachable points per robot in the `small` scenario (left of its wall, no obstacle on the

@@ -1,12 +1,12 @@
 """Evaluation metrics (sb3_dtdpg.evaluation) on scripted policies whose outcome is known."""
 
 import gymnasium as gym
-import noma_radiomap
 import numpy as np
 import pytest
-from noma_radiomap.planners import ShortestPathPlanner
 from scipy import stats
 
+import noma_radiomap
+from noma_radiomap.planners import ShortestPathPlanner
 from sb3_dtdpg.evaluation import Planner, evaluate, mean_ci
 
 # A mission on `small`: robot 0 from the bottom-left room to (10, 2) through the doorway, robot 1 to (9, 4).

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from noma_radiomap import RadioMap, load_scenario
 from noma_radiomap import geometry as G
 from noma_radiomap.scenario import Scenario

@@ -5,6 +5,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+
 from noma_radiomap.motion import GridMotion, clip_displacements
 
 RES = 0.5

@@ -3,13 +3,13 @@
 import itertools
 
 import gymnasium as gym
-import noma_radiomap  # noqa: F401
 import numpy as np
 import pytest
+
+import noma_radiomap  # noqa: F401
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
 from noma_radiomap.planners import CommAwarePlanner, RandomPlanner, ShortestPathPlanner, channel_maps
 from noma_radiomap.propagation import dbm_to_watt
-
 from sb3_dtdpg.evaluation import evaluate
 
 

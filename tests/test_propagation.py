@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from noma_radiomap.propagation import (
     EXPECTED_FADING_DB,
     dbm_to_watt,

@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+
 from noma_radiomap import RadioMap, load_scenario
 from noma_radiomap import geometry as G
 

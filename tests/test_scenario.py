@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+
 from noma_radiomap import Scenario, list_scenarios, load_scenario
 
 

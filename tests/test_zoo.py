@@ -20,10 +20,10 @@ import yaml
 rl_zoo3 = pytest.importorskip("rl_zoo3")
 optuna = pytest.importorskip("optuna")
 
-import noma_radiomap  # noqa: E402, F401
 from stable_baselines3 import DDPG  # noqa: E402
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # noqa: E402
 
+import noma_radiomap  # noqa: E402, F401
 from sb3_dtdpg import DTDPG  # noqa: E402
 from sb3_dtdpg.common.phases import parse_phases  # noqa: E402
 from sb3_dtdpg.zoo import NET_ARCHS, ExperimentManager, convert_dtdpg_params, register_dtdpg, sample_dtdpg_params  # noqa: E402

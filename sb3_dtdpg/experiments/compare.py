@@ -64,7 +64,6 @@ def evaluate_planners(
     :return: the table rows and, per mode, the planners' first test trajectory
     """
     from noma_radiomap import planners
-
     from sb3_dtdpg.evaluation import evaluate
     from sb3_dtdpg.experiments.tables import planner_row
 

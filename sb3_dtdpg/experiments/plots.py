@@ -169,6 +169,7 @@ def plot_trajectories(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from noma_radiomap import RadioMap, load_scenario
 
     scenario = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario

@@ -213,7 +213,6 @@ def run_reproduce(
 
 def _figures(out: Path, budget: Budget, experiments: dict[str, list[RunSpec]], results: dict[str, Any]) -> None:
     from noma_radiomap import RadioMap, load_scenario
-
     from sb3_dtdpg.experiments import plots
 
     scenario = load_scenario(budget.scenario or "mall")

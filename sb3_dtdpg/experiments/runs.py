@@ -184,11 +184,11 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
     :param n_trajectories: how many test episodes' trajectories to keep in the result
     :return: the result (as written)
     """
-    import noma_radiomap  # noqa: F401  (registers the env ids in a spawned worker)
     import torch as th
     from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
     from stable_baselines3.common.logger import configure
 
+    import noma_radiomap  # noqa: F401  (registers the env ids in a spawned worker)
     from sb3_dtdpg.baselines import algorithm_class, make_env, make_model, mission_callbacks
     from sb3_dtdpg.evaluation import evaluate
 
