@@ -77,14 +77,16 @@ def run_phase1(seed: int, args: argparse.Namespace, slot: int) -> dict[str, Any]
     os.makedirs(run_dir, exist_ok=True)
     env = gym.make(args.env)
     phases = _phases(args.phase1_episodes, args.phase2_episodes, "keep")
-    # Reward components stored in every run, so that the phase-2 branches start from the same buffer
+    # Reward components stored in every run, so that the phase-2 branches start from the same buffer. SB3 sets
+    # up n-step returns only with its own buffer, so with n_steps > 1 the components are not stored (no relabel).
+    n_step = args.hyperparams.get("n_steps", 1) > 1
     model = DTDPG(
         "MlpPolicy",
         env,
         phases=phases,
         seed=seed,
         curriculum_save_path=run_dir,
-        replay_buffer_class=RewardComponentsReplayBuffer,
+        replay_buffer_class=None if n_step else RewardComponentsReplayBuffer,
         **args.hyperparams,
     )
     recorder = _episode_recorder(slot, args.phase1_episodes, f"seed {seed} phase 1")
@@ -133,7 +135,7 @@ def run_phase2(seed: int, handling: str, args: argparse.Namespace, slot: int) ->
     env = gym.make(args.env)
     model = DTDPG.load(os.path.join(run_dir, "phase_0_destination.zip"), env=env, device="cpu")
     model.load_replay_buffer(os.path.join(run_dir, "phase_0_buffer.pkl"))
-    assert isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
+    assert handling != "relabel" or isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
     model.phases = _phases(args.phase1_episodes, args.phase2_episodes, handling)
     model.curriculum_save_path = os.path.join(run_dir, handling)
     recorder = _episode_recorder(slot, args.phase2_episodes, f"seed {seed} {handling}")
@@ -172,6 +174,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="results/learning")
     args = parser.parse_args()
+    if args.hyperparams.get("n_steps", 1) > 1 and "relabel" in args.handlings and not args.phase1_only:
+        parser.error("n_steps > 1: 'relabel' needs the reward-components buffer (1-step returns); drop it from --handlings")
     os.makedirs(args.out, exist_ok=True)
 
     phase1: dict[int, dict[str, Any]] = {}
