@@ -108,7 +108,7 @@ def run_compare(
     :param algos: algorithms (see :data:`sb3_dtdpg.baselines.ALGORITHMS`)
     :param modes: multiple-access modes
     :param n_workers: parallel processes (default: the number of CPUs)
-    :param progress: show progress bars and print the table
+    :param progress: show progress bars
     :param env_id: the env id
     :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
     :return: the summary table (learners and planners)
@@ -146,8 +146,7 @@ def run_compare(
         f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds)"
     )
     tables.save_tables(summary, records, out, "results", title)
-    if progress:
-        tables.print_table(summary, title)
+    tables.print_table(summary, title)
 
     groups: dict[str, list[Path]] = {}
     for spec in specs:
