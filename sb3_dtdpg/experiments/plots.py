@@ -130,12 +130,7 @@ def plot_learning_curves(
         ax.grid(alpha=0.3)
     if axes[0][0].get_legend_handles_labels()[0]:
         axes[0][0].legend(fontsize=8)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return fig
+    return _save(fig, path, title)
 
 
 def episode_destinations(record: Mapping[str, Any]) -> np.ndarray | None:
@@ -206,6 +201,13 @@ def plot_trajectories(
                 ax.plot(*trajectory[-1, u], marker="s", ms=5, color=colours[k % len(colours)], mec="black")
         ax.set_title(panel)
         ax.legend(fontsize=7, loc="upper right", framealpha=0.6)
+    return _save(fig, path, title)
+
+
+def _save(fig: Any, path: str | Path, title: str | None) -> Any:
+    """Add the title, write the figure to ``path`` and release it; return the figure."""
+    import matplotlib.pyplot as plt
+
     if title:
         fig.suptitle(title)
     fig.tight_layout()
