@@ -70,23 +70,20 @@ def run_phase1(seed: int, args: argparse.Namespace, slot: int) -> dict[str, Any]
 
     import noma_radiomap  # noqa: F401  (registers the env)
     from sb3_dtdpg import DTDPG
-    from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
 
     th.set_num_threads(1)
     run_dir = os.path.join(args.out, f"seed_{seed}")
     os.makedirs(run_dir, exist_ok=True)
     env = gym.make(args.env)
     phases = _phases(args.phase1_episodes, args.phase2_episodes, "keep")
-    # Reward components stored in every run, so that the phase-2 branches start from the same buffer. SB3 sets
-    # up n-step returns only with its own buffer, so with n_steps > 1 the components are not stored (no relabel).
-    n_step = args.hyperparams.get("n_steps", 1) > 1
+    # Reward components stored in every run, so that the phase-2 branches start from the same buffer
     model = DTDPG(
         "MlpPolicy",
         env,
         phases=phases,
         seed=seed,
         curriculum_save_path=run_dir,
-        replay_buffer_class=None if n_step else RewardComponentsReplayBuffer,
+        **_components_buffer(args.hyperparams),
         **args.hyperparams,
     )
     recorder = _episode_recorder(slot, args.phase1_episodes, f"seed {seed} phase 1")
@@ -107,6 +104,21 @@ def run_phase1(seed: int, args: argparse.Namespace, slot: int) -> dict[str, Any]
         "phase1_success_curve": recorder.success,
         "phase1_mqi_curve": recorder.mqi,
     }
+
+
+def _components_buffer(hyperparams: dict[str, Any]) -> dict[str, Any]:
+    """The DTDPG kwargs of a replay buffer that stores reward components, with the run's n-step returns."""
+    import inspect
+
+    from sb3_dtdpg import DTDPG
+    from sb3_dtdpg.common.buffers import RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
+
+    n_steps = hyperparams.get("n_steps", 1)
+    if n_steps == 1:
+        return {"replay_buffer_class": RewardComponentsReplayBuffer}
+    gamma = hyperparams.get("gamma", inspect.signature(DTDPG).parameters["gamma"].default)
+    buffer_kwargs = {"n_steps": n_steps, "gamma": gamma}
+    return {"replay_buffer_class": RewardComponentsNStepReplayBuffer, "replay_buffer_kwargs": buffer_kwargs}
 
 
 def _stop_at_phase(index: int) -> Any:
@@ -174,8 +186,6 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="results/learning")
     args = parser.parse_args()
-    if args.hyperparams.get("n_steps", 1) > 1 and "relabel" in args.handlings and not args.phase1_only:
-        parser.error("n_steps > 1: 'relabel' needs the reward-components buffer (1-step returns); drop it from --handlings")
     os.makedirs(args.out, exist_ok=True)
 
     phase1: dict[int, dict[str, Any]] = {}

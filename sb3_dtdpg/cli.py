@@ -20,6 +20,9 @@ from pathlib import Path
 __all__ = ["main"]
 
 _PUBLIC_BUDGETS = ("tiny", "default", "small", "reduced", "paper")
+_HYPERPARAMS_HELP = (
+    "paper: Table I (default); tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md)"
+)
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
@@ -50,7 +53,13 @@ def _cmd_train(args: argparse.Namespace) -> int:
     env_kwargs = {} if args.scenario is None else {"scenario": args.scenario}
     env = make_env(args.algo, args.env, args.multiple_access, args.channel, env_kwargs)
     model = make_model(
-        args.algo, env, seed=args.seed, tensorboard_log=args.tb, learning_rate=args.learning_rate, verbose=args.verbose
+        args.algo,
+        env,
+        seed=args.seed,
+        tensorboard_log=args.tb,
+        learning_rate=args.learning_rate,
+        verbose=args.verbose,
+        hyperparams=args.hyperparams,
     )
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
     callbacks = [EpisodeReturnLogger(), *mission_callbacks(model)]
@@ -98,6 +107,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         n_workers=args.workers,
         progress=not args.no_progress,
         env_id=args.env,
+        hyperparams=args.hyperparams,
     )
     return 0
 
@@ -113,6 +123,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         n_workers=args.workers,
         progress=not args.no_progress,
         train=not args.report_only,
+        hyperparams=args.hyperparams,
     )
     return 0
 
@@ -134,7 +145,7 @@ def _positive(value: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """:return: the argument parser of ``sb3-dtdpg``"""
-    from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID
+    from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID, HYPERPARAMS
 
     parser = argparse.ArgumentParser(prog="sb3-dtdpg", description="DT-DPG on the NOMA indoor radio-map environment.")
     commands = parser.add_subparsers(dest="command", required=True)
@@ -155,6 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--multiple-access", choices=("noma", "oma"), default="noma")
     p.add_argument("--channel", choices=("radio_map", "rayleigh"), default="radio_map", help="training channel")
     p.add_argument("--learning-rate", type=float, default=None, help="override the algorithm's learning rate")
+    p.add_argument("--hyperparams", choices=HYPERPARAMS, default="paper", help=_HYPERPARAMS_HELP)
     p.add_argument("--tb", default="runs", help="TensorBoard folder (default: runs)")
     p.add_argument("--out", default="results/train", help="where the model is saved (default: results/train)")
     p.add_argument("--eval-episodes", type=_positive, default=20)
@@ -172,6 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--modes", nargs="+", choices=("noma", "oma"), default=["noma", "oma"])
     p.add_argument("--env", default=DEFAULT_ENV_ID)
     p.add_argument("--scenario", default=None, help="scenario name or YAML path (default: the budget's; mall)")
+    p.add_argument("--hyperparams", choices=HYPERPARAMS, default="paper", help=_HYPERPARAMS_HELP)
     p.add_argument("--workers", type=_positive, default=None, help="parallel processes (default: number of CPUs)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_cmd_compare)
@@ -181,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=_positive, default=None, help="seeds per configuration (default: the budget's)")
     p.add_argument("--out", default="results/reproduce", help="output folder (default: results/reproduce)")
     p.add_argument("--report-only", action="store_true", help="only re-draw tables and figures from the finished runs")
+    p.add_argument("--hyperparams", choices=HYPERPARAMS, default="paper", help=_HYPERPARAMS_HELP)
     p.add_argument("--workers", type=_positive, default=None, help="parallel processes (default: number of CPUs)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_cmd_reproduce)

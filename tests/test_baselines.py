@@ -1,14 +1,29 @@
 """The algorithm set (sb3_dtdpg.baselines): every algorithm in NOMA and OMA, with its documented settings."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch as th
+import yaml
 from sb3_contrib import TQC
 from stable_baselines3 import DDPG, SAC, TD3
+from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
 from sb3_dtdpg import DTDPG
-from sb3_dtdpg.baselines import ALGORITHMS, DDPG_OU_SIGMA, algorithm_class, make_env, make_model, reward_phase
+from sb3_dtdpg.baselines import (
+    ALGORITHMS,
+    DDPG_OU_SIGMA,
+    TUNED_KWARGS,
+    algorithm_class,
+    base_learning_rate,
+    make_env,
+    make_model,
+    reward_phase,
+)
+
+ZOO_CONFIGS = Path(__file__).resolve().parents[1] / "zoo_configs"
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)
@@ -55,3 +70,35 @@ def test_options_are_validated():
     model = make_model("dtdpg", make_env("dtdpg", env_kwargs={"scenario": "small"}), destination_episodes=7)
     assert model.phases[0].n_episodes == 7 and model.phases[0].reward_phase == "destination"
     assert make_model("dtdpg", make_env("dtdpg", env_kwargs={"scenario": "small"}), learning_rate=1e-3).learning_rate == 1e-3
+
+
+@pytest.mark.parametrize("algo", ["dtdpg", "ddpg"])
+def test_tuned_hyperparameters_are_shared_by_dtdpg_and_ddpg(algo):
+    model = make_model(algo, make_env(algo, env_kwargs={"scenario": "small"}), seed=0, hyperparams="tuned")
+    got = (model.learning_rate, model.batch_size, model.tau, model.gamma, model.buffer_size, model.learning_starts)
+    assert got == (1e-3, 128, 0.005, 0.95, 200_000, 2000)
+    assert isinstance(model.replay_buffer, NStepReplayBuffer) and model.replay_buffer.n_steps == 3
+    assert model.replay_buffer.gamma == 0.95
+    first_layer = next(m for m in model.actor.modules() if isinstance(m, th.nn.Linear))
+    assert first_layer.out_features == 128
+    assert base_learning_rate(algo, "tuned") == model.learning_rate
+    if algo == "ddpg":  # still the paper's plain baseline: no batch norm, constant OU noise
+        assert not any(isinstance(m, th.nn.BatchNorm1d) for m in model.policy.modules())
+        assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
+
+
+def test_tuned_set_is_the_zoo_entry():
+    entry = yaml.safe_load((ZOO_CONFIGS / "dtdpg.yml").read_text())["NomaRadioMap-v0"]
+    assert eval(entry["policy_kwargs"]) == TUNED_KWARGS["policy_kwargs"]  # the zoo's format: a Python literal
+    assert {key: entry[key] for key in TUNED_KWARGS if key != "policy_kwargs"} == {
+        key: value for key, value in TUNED_KWARGS.items() if key != "policy_kwargs"
+    }
+
+
+def test_paper_learning_rates():
+    assert base_learning_rate("dtdpg") == 1e-4 == base_learning_rate("ddpg")
+    assert base_learning_rate("sac") == SAC("MlpPolicy", "Pendulum-v1").learning_rate
+    with pytest.raises(ValueError, match="hyperparams must be one of"):
+        base_learning_rate("dtdpg", "fast")
+    with pytest.raises(ValueError, match="'tuned' is defined for 'dtdpg' and 'ddpg' only, got algo='td3'"):
+        make_model("td3", make_env("td3", env_kwargs={"scenario": "small"}), hyperparams="tuned")

@@ -6,7 +6,7 @@ from stable_baselines3 import DDPG
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
-from sb3_dtdpg.common.buffers import REWARD_COMPONENTS, RewardComponentsReplayBuffer
+from sb3_dtdpg.common.buffers import REWARD_COMPONENTS, RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
 
 OBS_SPACE = spaces.Box(-1, 1, (2,), np.float32)
 ACT_SPACE = spaces.Box(-1, 1, (1,), np.float32)
@@ -61,6 +61,37 @@ def test_relabel_recomputes_every_reward():
     samples = buffer.sample(16)
     flat = buffer.rewards[:3].reshape(-1)
     assert all(np.isclose(flat, r, rtol=1e-6).any() for r in samples.rewards.numpy().reshape(-1))
+
+
+def test_n_step_returns_after_relabel_are_the_new_phase_sums():
+    gamma, n = 0.9, 3
+    buffer = RewardComponentsNStepReplayBuffer(16, OBS_SPACE, ACT_SPACE, device="cpu", n_envs=1, n_steps=n, gamma=gamma)
+    rng = np.random.default_rng(3)
+    dones = [0, 0, 0, 1, 0, 0, 0, 0, 0, 0]  # an episode ends on step 3: returns must not cross it
+    comps = []
+    for done in dones:
+        info = {"reward_components": random_components(rng)}
+        obs, next_obs = rng.uniform(-1, 1, (2, 1, 2)).astype(np.float32)
+        buffer.add(obs, next_obs, np.zeros((1, 1), np.float32), np.zeros(1, np.float32), np.array([done]), [info])
+        comps.append([info["reward_components"][key] for key in REWARD_COMPONENTS])
+    weights = {"time": -1.0, "qos": 2.0, "success": 10.0}
+    buffer.relabel(weights)
+    one_step = np.array(comps) @ np.array([weights.get(key, 0.0) for key in REWARD_COMPONENTS])
+
+    starts = np.arange(len(dones) - n)
+    samples = buffer._get_samples(starts)
+    expected, discounts = [], []
+    for start in starts:
+        total, k = 0.0, 0
+        while k < n:
+            total += gamma**k * one_step[start + k]
+            k += 1
+            if dones[start + k - 1]:
+                break
+        expected.append(total)
+        discounts.append(gamma**k)
+    np.testing.assert_allclose(samples.rewards.numpy().ravel(), expected, rtol=1e-5)
+    np.testing.assert_allclose(samples.discounts.numpy().ravel(), discounts, rtol=1e-6)
 
 
 def test_relabel_rejects_unknown_component():

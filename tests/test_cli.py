@@ -106,6 +106,16 @@ def test_reproduce_skips_finished_runs(tmp_path):
         assert (tmp_path / name).exists(), name
 
 
+def test_reproduce_with_tuned_hyperparameters_compares_the_paper_learning_rate():
+    experiments = reproduce_specs(MICRO, seeds=1, hyperparams="tuned")
+    specs = [s for specs in experiments.values() for s in specs]
+    assert {s.hyperparams for s in specs} == {"tuned"} and all(s.run_id.endswith("_tuned") for s in specs)
+    assert {s.learning_rate for s in experiments["learning_rates"]} == {None, 1e-4}  # the set's own 1e-3, and 1e-4
+    assert {s.learning_rate for s in reproduce_specs(MICRO, seeds=1)["learning_rates"]} == {None, 1e-3}
+    paper_ids = {s.run_id for specs in reproduce_specs(MICRO, seeds=1).values() for s in specs}
+    assert paper_ids.isdisjoint(s.run_id for s in specs)  # one output folder can hold both sets
+
+
 def test_map_and_train_commands(tmp_path):
     assert main(["map", "--scenario", "small", "--out", str(tmp_path / "maps")]) == 0
     assert (tmp_path / "maps" / "maps_small.png").stat().st_size > 0
@@ -122,6 +132,7 @@ def test_map_and_train_commands(tmp_path):
         (["compare", "--budget", "huge"], "budget must be one of"),
         (["compare", "--seeds", "0"], "positive integer"),
         (["train", "--algo", "ppo"], "invalid choice"),
+        (["reproduce", "--hyperparams", "fast"], "invalid choice"),
     ],
 )
 def test_bad_arguments_are_rejected(argv, message, capsys):

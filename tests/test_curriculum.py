@@ -13,7 +13,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.utils import set_random_seed
 
-from sb3_dtdpg.common.buffers import REWARD_COMPONENTS, RewardComponentsReplayBuffer
+from sb3_dtdpg.common.buffers import REWARD_COMPONENTS, RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback, MissionLoggerCallback
 from sb3_dtdpg.common.noise import noise_sigma
 from sb3_dtdpg.common.phases import Phase
@@ -176,10 +176,16 @@ def test_training_from_phase_checkpoint_enters_next_phase(algo, tmp_path):
 
 @pytest.mark.parametrize("algo", ALGOS)
 @pytest.mark.parametrize("handling", ["keep", "relabel", "clear"])
-def test_replay_handling(algo, handling):
-    model, curriculum = make_model(
-        algo, make_env(), two_phases(replay_handling=handling), replay_buffer_class=RewardComponentsReplayBuffer
-    )
+@pytest.mark.parametrize("n_steps", [1, 3])
+def test_replay_handling(algo, handling, n_steps):
+    if n_steps == 1:
+        buffer_kwargs = {"replay_buffer_class": RewardComponentsReplayBuffer}
+    else:
+        buffer_kwargs = {
+            "replay_buffer_class": RewardComponentsNStepReplayBuffer,
+            "replay_buffer_kwargs": {"n_steps": n_steps, "gamma": 0.99},
+        }
+    model, curriculum = make_model(algo, make_env(), two_phases(replay_handling=handling), **buffer_kwargs)
     learn(model, curriculum, 100)
     buffer = model.replay_buffer
     stored = buffer.rewards[: buffer.pos, 0].astype(np.float64)

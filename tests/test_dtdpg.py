@@ -2,6 +2,7 @@
 
 import inspect
 import os
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -16,7 +17,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.noise import NormalActionNoise, VectorizedActionNoise
 
 from sb3_dtdpg import DTDPG, LinearDecayOUNoise, Phase
-from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
+from sb3_dtdpg.common.buffers import RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
 from sb3_dtdpg.dtdpg.policies import DTDPGPolicy
 
 TINY = dict(policy_kwargs=dict(net_arch=[32]), learning_starts=50, batch_size=32)
@@ -88,6 +89,20 @@ def test_phases_and_noise_on_a_phased_env():
     assert type(DTDPG("MlpPolicy", PhasedPointEnv(), replay_buffer_class=ReplayBuffer, phases=phases[:1]).replay_buffer) is (
         ReplayBuffer
     )
+
+
+def test_relabel_with_n_step_returns_picks_the_n_step_components_buffer(tmp_path):
+    phases = [dict(name="destination", n_episodes=2, sigma=0.3), dict(name="mqi", replay_handling="relabel")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # SB3's "n_steps is ignored" warning would be wrong here
+        model = DTDPG("MlpPolicy", PhasedPointEnv(), phases=phases, n_steps=3, gamma=0.9, **TINY)
+        buffer = model.replay_buffer
+        assert type(buffer) is RewardComponentsNStepReplayBuffer
+        assert (buffer.n_steps, buffer.gamma) == (3, 0.9)
+        model.save(tmp_path / "model")
+        loaded = DTDPG.load(tmp_path / "model", env=PhasedPointEnv())
+    assert type(loaded.replay_buffer) is RewardComponentsNStepReplayBuffer
+    assert (loaded.replay_buffer.n_steps, loaded.replay_buffer.gamma) == (3, 0.9)
 
 
 def noise_sigma_of(model: DTDPG) -> float:

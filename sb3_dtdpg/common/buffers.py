@@ -1,4 +1,4 @@
-"""Replay buffer that keeps the reward components of every transition, so rewards can be relabelled."""
+"""Replay buffers that keep the reward components of every transition, so rewards can be relabelled."""
 
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -6,7 +6,7 @@ from typing import Any
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
 
 #: Reward components of ``noma_radiomap`` (SPEC 2.9), in the order they are stored.
 REWARD_COMPONENTS: tuple[str, ...] = ("time", "inducing", "qos", "arrival", "success")
@@ -31,6 +31,8 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
     :param handle_timeout_termination: Handle timeout termination (due to timelimit) separately and treat the task
         as infinite horizon task (see SB3's ``ReplayBuffer``)
     :param component_keys: Names of the reward components, the keys every ``info["reward_components"]`` must have
+    :param kwargs: Further arguments of the parent buffer class (``n_steps`` and ``gamma`` of
+        :class:`RewardComponentsNStepReplayBuffer`)
     """
 
     reward_components: np.ndarray
@@ -45,6 +47,7 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
         optimize_memory_usage: bool = False,
         handle_timeout_termination: bool = True,
         component_keys: Sequence[str] = REWARD_COMPONENTS,
+        **kwargs: Any,
     ):
         super().__init__(
             buffer_size,
@@ -54,6 +57,7 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
             n_envs=n_envs,
             optimize_memory_usage=optimize_memory_usage,
             handle_timeout_termination=handle_timeout_termination,
+            **kwargs,
         )
         component_keys = tuple(component_keys)
         if not component_keys or len(set(component_keys)) != len(component_keys):
@@ -116,3 +120,21 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
     def clear(self) -> None:
         """Empty the buffer (the storage is kept and overwritten by the next transitions)."""
         self.reset()
+
+
+class RewardComponentsNStepReplayBuffer(RewardComponentsReplayBuffer, NStepReplayBuffer):
+    """
+    :class:`RewardComponentsReplayBuffer` with n-step returns (SB3's ``NStepReplayBuffer``).
+
+    SB3's n-step buffer stores one-step rewards and sums ``n_steps`` of them, discounted by ``gamma``, when it
+    samples; :meth:`relabel` rewrites the one-step rewards, so the n-step returns sampled after a relabel are
+    those of the new reward phase. ``DTDPG`` picks this buffer when a phase relabels and ``n_steps > 1``.
+
+    :param args: Arguments of :class:`RewardComponentsReplayBuffer`
+    :param n_steps: Number of steps summed in a return
+    :param gamma: Discount factor of the n-step sums (the algorithm's ``gamma``)
+    :param kwargs: Keyword arguments of :class:`RewardComponentsReplayBuffer`
+    """
+
+    def __init__(self, *args: Any, n_steps: int = 3, gamma: float = 0.99, **kwargs: Any):
+        super().__init__(*args, n_steps=n_steps, gamma=gamma, **kwargs)

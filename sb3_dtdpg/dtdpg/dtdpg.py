@@ -1,17 +1,18 @@
 import dataclasses
+import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
 from stable_baselines3 import DDPG
-from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
-from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
+from sb3_dtdpg.common.buffers import RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback, MissionLoggerCallback
 from sb3_dtdpg.common.noise import LinearDecayOUNoise
 from sb3_dtdpg.common.phases import Phase, default_phases, parse_phases, single_phase
@@ -61,7 +62,8 @@ class DTDPG(DDPG):
         :func:`~sb3_dtdpg.common.noise.rearm_noise`).
     :param replay_buffer_class: Replay buffer class to use (for instance ``HerReplayBuffer``).
         If ``None``: :class:`~sb3_dtdpg.common.buffers.RewardComponentsReplayBuffer` when a phase relabels
-        the replay buffer, else SB3's choice.
+        the replay buffer (:class:`~sb3_dtdpg.common.buffers.RewardComponentsNStepReplayBuffer` with
+        ``n_steps > 1``), else SB3's choice.
     :param replay_buffer_kwargs: Keyword arguments to pass to the replay buffer on creation.
     :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer
         at a cost of more complexity.
@@ -158,10 +160,29 @@ class DTDPG(DDPG):
             mean = np.zeros(self.action_space.shape, dtype=np.float32)
             self.action_noise = LinearDecayOUNoise(mean, *schedule)
         if self.replay_buffer_class is None and any(phase.replay_handling == "relabel" for phase in self.phases[1:]):
-            self.replay_buffer_class = RewardComponentsReplayBuffer
+            if self.n_steps > 1:
+                self.replay_buffer_class = RewardComponentsNStepReplayBuffer
+                self.replay_buffer_kwargs = {"n_steps": self.n_steps, "gamma": self.gamma, **self.replay_buffer_kwargs}
+            else:
+                self.replay_buffer_class = RewardComponentsReplayBuffer
 
         if _init_setup_model:
             self._setup_model()
+
+    def _setup_model(self) -> None:
+        configured_n_step = (
+            self.n_steps > 1
+            and self.replay_buffer_class is not None
+            and issubclass(self.replay_buffer_class, NStepReplayBuffer)
+            and self.replay_buffer_kwargs.get("n_steps") == self.n_steps
+        )
+        with warnings.catch_warnings():
+            if configured_n_step:
+                # SB3 warns that n_steps is ignored whenever a buffer class is given, also when the class is the
+                # n-step buffer it picked itself before a save (load) or our relabelling n-step buffer: the
+                # returns are set up, so the warning would be wrong here
+                warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored", category=UserWarning)
+            super()._setup_model()
 
     def learn(
         self: SelfDTDPG,

@@ -32,6 +32,7 @@ def compare_specs(
     algos: Sequence[str] = ("dtdpg", "ddpg"),
     modes: Sequence[str] = ("noma", "oma"),
     env_id: str = "NomaRadioMap-v0",
+    hyperparams: str = "paper",
 ) -> list[RunSpec]:
     """:return: the runs of a comparison (every algorithm x mode x seed, trained on the radio map)"""
     return [
@@ -44,6 +45,7 @@ def compare_specs(
             scenario=budget.scenario,
             eval_episodes=budget.eval_episodes,
             eval_before_transfer=False,
+            hyperparams=hyperparams,
         )
         for algo in algos
         for mode in modes
@@ -98,6 +100,7 @@ def run_compare(
     progress: bool = True,
     env_id: str = "NomaRadioMap-v0",
     scenario: str | None = None,
+    hyperparams: str = "paper",
 ) -> pd.DataFrame:
     """
     Train and evaluate every algorithm x mode x seed (finished runs are kept), then write the tables and figures.
@@ -111,9 +114,10 @@ def run_compare(
     :param progress: show progress bars
     :param env_id: the env id
     :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
+    :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :return: the summary table (learners and planners)
     """
-    from sb3_dtdpg.baselines import ALGORITHMS
+    from sb3_dtdpg.baselines import ALGORITHMS, base_learning_rate
     from sb3_dtdpg.experiments import plots, tables
 
     budget = _budget(budget)
@@ -125,12 +129,14 @@ def run_compare(
     bad_modes = [m for m in modes if m not in ("noma", "oma")]
     if bad_modes:
         raise ValueError(f"modes: expected 'noma' and/or 'oma', got {bad_modes}")
+    for algo in algos:
+        base_learning_rate(algo, hyperparams)  # a bad set, or one undefined for an algorithm, fails before any run
     seeds = budget.seeds if seeds is None else seeds
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    specs = compare_specs(budget, seeds, algos, modes, env_id)
+    specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams)
     report = run_many(specs, out, n_workers=n_workers, progress=progress)
     for run_id, error in report.failed.items():
         print(f"run {run_id} failed: {error}")
@@ -143,7 +149,7 @@ def run_compare(
     summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
     title = (
         f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes, "
-        f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds)"
+        f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds, {hyperparams} hyperparameters)"
     )
     tables.save_tables(summary, records, out, "results", title)
     tables.print_table(summary, title)

@@ -5,7 +5,10 @@ Runs (per seed; ``E`` and ``L`` are the budget's ``episodes`` and ``long_episode
 - Table II: DT-DPG in NOMA and OMA, trained on the radio map for ``E`` episodes and in "reality"
   (Rayleigh fading) for ``E`` and ``L`` episodes, tested on 20 Rayleigh episodes;
 - DDPG vs DT-DPG: plain DDPG in NOMA and OMA, radio map, ``E`` episodes (success rate and MQI);
-- the two learning rates: DT-DPG at 1e-3 besides the default 1e-4 (paper Fig. 6), NOMA and OMA.
+- the two learning rates (paper Fig. 6): DT-DPG at 1e-3 and 1e-4 (one is the hyperparameter set's own), NOMA and OMA.
+
+Every run uses one hyperparameter set (``hyperparams``): ``"paper"`` (Table I) or ``"tuned"`` (the best measured
+DT-DPG settings, given to DDPG as well; see :mod:`sb3_dtdpg.baselines`).
 
 Figures: the power and SINR maps, trajectories NOMA vs OMA and before/after the transfer, reward per
 episode in both phases for the two learning rates, MQI per episode (the dip at the transfer) and
@@ -20,11 +23,12 @@ from typing import Any
 
 import pandas as pd
 
+from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments.compare import _budget, evaluate_planners
 from sb3_dtdpg.experiments.runs import Budget, RunSpec, load_result, run_many
 
-__all__ = ["PAPER_TABLE_II", "reproduce_specs", "run_reproduce"]
+__all__ = ["LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
 
 #: Paper Table II: (MA mode, approach, training episodes) -> MQI over 20 Rayleigh test episodes.
 PAPER_TABLE_II: dict[tuple[str, str, str], float] = {
@@ -35,10 +39,26 @@ PAPER_TABLE_II: dict[tuple[str, str, str], float] = {
     ("NOMA", "reality", "E"): 919.0,
     ("NOMA", "reality", "L"): 929.0,
 }
-HIGH_LEARNING_RATE = 1e-3
+#: The paper's two learning rates (Fig. 6).
+LEARNING_RATES = (1e-4, 1e-3)
 
 
-def _spec(budget: Budget, algo: str, mode: str, seed: int, channel: str, episodes: int, lr: float | None = None) -> RunSpec:
+def other_learning_rate(hyperparams: str) -> float:
+    """:return: the paper's learning rate that DT-DPG does not have by default under ``hyperparams``"""
+    base = base_learning_rate("dtdpg", hyperparams)
+    return next(lr for lr in LEARNING_RATES if not math.isclose(lr, base))
+
+
+def _spec(
+    budget: Budget,
+    algo: str,
+    mode: str,
+    seed: int,
+    channel: str,
+    episodes: int,
+    lr: float | None = None,
+    hyperparams: str = "paper",
+) -> RunSpec:
     tag = f"{'radio_map' if channel == 'radio_map' else 'reality'}_{episodes}" + (f"_lr{lr:g}" if lr is not None else "")
     return RunSpec(
         algo,
@@ -50,22 +70,25 @@ def _spec(budget: Budget, algo: str, mode: str, seed: int, channel: str, episode
         scenario=budget.scenario,
         eval_episodes=budget.eval_episodes,
         tag=tag,
+        hyperparams=hyperparams,
     )
 
 
-def reproduce_specs(budget: Budget, seeds: int) -> dict[str, list[RunSpec]]:
+def reproduce_specs(budget: Budget, seeds: int, hyperparams: str = "paper") -> dict[str, list[RunSpec]]:
     """:return: the runs of every experiment, by experiment (a run may serve several experiments)"""
     e, long = budget.episodes, budget.long_episodes
     modes = ("noma", "oma")
+    h = hyperparams
     table = [
-        _spec(budget, "dtdpg", m, s, c, n)
+        _spec(budget, "dtdpg", m, s, c, n, hyperparams=h)
         for m in modes
         for c, n in (("radio_map", e), ("rayleigh", e), ("rayleigh", long))
         for s in range(seeds)
     ]
-    ddpg = [_spec(budget, "ddpg", m, s, "radio_map", e) for m in modes for s in range(seeds)]
-    dtdpg = [_spec(budget, "dtdpg", m, s, "radio_map", e) for m in modes for s in range(seeds)]
-    lrs = [_spec(budget, "dtdpg", m, s, "radio_map", e, HIGH_LEARNING_RATE) for m in modes for s in range(seeds)]
+    ddpg = [_spec(budget, "ddpg", m, s, "radio_map", e, hyperparams=h) for m in modes for s in range(seeds)]
+    dtdpg = [_spec(budget, "dtdpg", m, s, "radio_map", e, hyperparams=h) for m in modes for s in range(seeds)]
+    other = other_learning_rate(h)
+    lrs = [_spec(budget, "dtdpg", m, s, "radio_map", e, other, hyperparams=h) for m in modes for s in range(seeds)]
     return {"ddpg_vs_dtdpg": dtdpg + ddpg, "table_ii": table, "learning_rates": dtdpg + lrs}
 
 
@@ -123,6 +146,7 @@ def run_reproduce(
     n_workers: int | None = None,
     progress: bool = True,
     train: bool = True,
+    hyperparams: str = "paper",
 ) -> dict[str, pd.DataFrame]:
     """
     Run (or resume) every experiment and write its tables (Markdown + CSV) and figures under ``out``.
@@ -133,6 +157,7 @@ def run_reproduce(
     :param n_workers: parallel processes (default: the number of CPUs)
     :param progress: progress bars and printed tables
     :param train: run the unfinished runs; False only re-draws the tables and figures from the finished ones
+    :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :return: the tables, by name
     """
     from sb3_dtdpg.experiments import tables
@@ -143,7 +168,8 @@ def run_reproduce(
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    experiments = reproduce_specs(budget, seeds)
+    base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
+    experiments = reproduce_specs(budget, seeds, hyperparams)
     unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
     # Seed by seed, so that an interrupted job has whole seeds of every experiment.
     unique.sort(key=lambda spec: spec.seed)
@@ -172,7 +198,7 @@ def run_reproduce(
             rec,
             out,
             "table_ii",
-            f"Table II: DT-DPG test MQI ({budget.name} budget)",
+            f"Table II: DT-DPG test MQI ({budget.name} budget, {hyperparams} hyperparameters)",
             columns=("multiple_access", "approach", "episodes"),
         )
         out_tables["table_ii"] = summary
@@ -184,21 +210,22 @@ def run_reproduce(
         summary = tables.summarise(rec)
         planner_rows, _ = evaluate_planners(("noma", "oma"), budget)
         summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
-        tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", f"DDPG vs DT-DPG ({budget.name} budget, radio-map training)")
+        title = f"DDPG vs DT-DPG ({budget.name} budget, {hyperparams} hyperparameters, radio-map training)"
+        tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", title)
         out_tables["ddpg_vs_dtdpg"] = summary
         if progress:
             tables.print_table(summary, "DDPG vs DT-DPG")
     # Learning rates.
     rec = records("learning_rates")
     if not rec.empty:
-        rec["learning_rate"] = rec["learning_rate"].fillna(1e-4)
+        rec["learning_rate"] = rec["learning_rate"].fillna(base_lr)
         summary = tables.summarise(rec, by=("multiple_access", "learning_rate"))
         tables.save_tables(
             summary,
             rec,
             out,
             "learning_rates",
-            f"DT-DPG with two learning rates ({budget.name} budget)",
+            f"DT-DPG with two learning rates ({budget.name} budget, {hyperparams} hyperparameters)",
             columns=("multiple_access", "learning_rate"),
         )
         out_tables["learning_rates"] = summary
@@ -207,11 +234,13 @@ def run_reproduce(
     dip = _dip_table(out, experiments, results)
     if dip is not None:
         out_tables["transfer_dip"] = dip
-    _figures(out, budget, experiments, results)
+    _figures(out, budget, experiments, results, base_lr)
     return out_tables
 
 
-def _figures(out: Path, budget: Budget, experiments: dict[str, list[RunSpec]], results: dict[str, Any]) -> None:
+def _figures(
+    out: Path, budget: Budget, experiments: dict[str, list[RunSpec]], results: dict[str, Any], base_lr: float
+) -> None:
     from noma_radiomap import RadioMap, load_scenario
     from sb3_dtdpg.experiments import plots
 
@@ -223,7 +252,7 @@ def _figures(out: Path, budget: Budget, experiments: dict[str, list[RunSpec]], r
         for spec in experiments[name]:
             if results[spec.run_id] is not None and all(getattr(spec, k) == v for k, v in match.items()):
                 label = f"{spec.algo.upper().replace('DTDPG', 'DT-DPG')} {spec.multiple_access.upper()}"
-                label += f" lr={spec.learning_rate or 1e-4:g}" if name == "learning_rates" else ""
+                label += f" lr={spec.learning_rate or base_lr:g}" if name == "learning_rates" else ""
                 groups.setdefault(label, []).append(out / "tb" / spec.run_id)
         return groups
 

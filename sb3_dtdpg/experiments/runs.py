@@ -84,6 +84,7 @@ class RunSpec:
     :param inducing: the env's inducing reward, ``"euclidean"`` (the paper's) or ``"geodesic"`` (None: the env's default)
     :param eval_before_transfer: DT-DPG only: also evaluate the network saved at the end of the destination
         phase (the "before transfer" trajectories of the paper's Fig. 5b)
+    :param hyperparams: hyperparameter set of :func:`sb3_dtdpg.baselines.make_model` (``"paper"`` or ``"tuned"``)
     """
 
     algo: str
@@ -101,16 +102,21 @@ class RunSpec:
     tag: str = ""
     inducing: str | None = None
     eval_before_transfer: bool = True
+    hyperparams: str = "paper"
+
+    @property
+    def _suffix(self) -> str:
+        return (f"_{self.tag}" if self.tag else "") + (f"_{self.hyperparams}" if self.hyperparams != "paper" else "")
 
     @property
     def run_id(self) -> str:
-        """``<algo>_<mode>_s<seed>[_<tag>]``: the run's folder name under ``tb/`` and ``runs/``."""
-        return f"{self.algo}_{self.multiple_access}_s{self.seed}" + (f"_{self.tag}" if self.tag else "")
+        """``<algo>_<mode>_s<seed>[_<tag>][_<hyperparams>]``: the run's folder name under ``tb/`` and ``runs/``."""
+        return f"{self.algo}_{self.multiple_access}_s{self.seed}{self._suffix}"
 
     @property
     def group(self) -> str:
         """The run id without the seed: runs of one group are the seeds of one configuration."""
-        return f"{self.algo}_{self.multiple_access}" + (f"_{self.tag}" if self.tag else "")
+        return f"{self.algo}_{self.multiple_access}{self._suffix}"
 
     @property
     def env_kwargs(self) -> dict[str, Any]:
@@ -209,6 +215,7 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
         seed=spec.seed,
         learning_rate=spec.learning_rate,
         destination_episodes=destination_episodes,
+        hyperparams=spec.hyperparams,
         **({"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}),
     )
     # A logger of our own, so that the TensorBoard folder is exactly tb/<run_id> (SB3 would append "_1").
