@@ -1,5 +1,6 @@
 """SB3's generic checks applied to DTDPG (run, save/load, replay buffer, set_env, determinism, multi-env)."""
 
+import dataclasses
 import inspect
 import os
 import warnings
@@ -232,3 +233,24 @@ def test_user_callbacks_are_combined():
     model.learn(60, callback=[_ModeRecorder(), lambda _locals, _globals: calls.append(1) or True])
     assert len(calls) == 60
     assert model.curriculum_state["phase_index"] == 0
+
+
+class _PhasesWithoutWeights(PhasedPointEnv):
+    """Reward phases, but no reward_weights(): stored rewards cannot be recomputed."""
+
+    def __getattribute__(self, name):
+        if name == "reward_weights":
+            raise AttributeError(name)
+        return super().__getattribute__(name)
+
+
+def test_default_phases_relabel_when_the_env_gives_reward_weights():
+    model = DTDPG("MlpPolicy", PhasedPointEnv(), **TINY)
+    assert [phase.replay_handling for phase in model.phases] == ["keep", "relabel"]
+    assert isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
+    model = DTDPG("MlpPolicy", _PhasesWithoutWeights(), **TINY)
+    assert [phase.replay_handling for phase in model.phases] == ["keep", "keep"]
+    assert not isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
+    model.phases[0] = dataclasses.replace(model.phases[0], n_episodes=2)
+    model.learn(60)  # the transfer (after 2 episodes of 20 steps) happens without reward weights
+    assert model.curriculum_state["phase_index"] == 1

@@ -79,7 +79,8 @@ class DTDPG(DDPG):
         Setting it to auto, the code will be run on the GPU if possible.
     :param phases: The curriculum: :class:`~sb3_dtdpg.common.phases.Phase` objects or dicts of their fields
         (YAML). None: the paper's two phases ("destination" then "mqi") on an env with reward phases
-        (``set_reward_phase``), else a single phase that leaves the reward alone.
+        (``set_reward_phase``), the stored rewards relabelled at the transfer when the env has ``reward_weights``
+        (kept otherwise), else a single phase that leaves the reward alone.
     :param curriculum_save_path: Folder where the model is saved at the end of each phase
         (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved
     :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
@@ -148,7 +149,9 @@ class DTDPG(DDPG):
             self.phases = parse_phases(phases)
         else:
             if self.env is not None and self.env.has_attr("set_reward_phase"):
-                self.phases = default_phases()
+                # Relabelling (the measured best) needs the env's reward weights; without them the buffer is kept
+                relabel = self.env.has_attr("reward_weights")
+                self.phases = default_phases(replay_handling="relabel" if relabel else "keep")
             else:
                 self.phases = single_phase(sigma=0.5, final_sigma=0.1, decay_episodes=300)
             if action_noise is not None:  # the user's noise is used as is: the default phases leave it alone
