@@ -111,14 +111,11 @@ def _components_buffer(hyperparams: dict[str, Any]) -> dict[str, Any]:
     import inspect
 
     from sb3_dtdpg import DTDPG
-    from sb3_dtdpg.common.buffers import RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
+    from sb3_dtdpg.common.buffers import reward_components_buffer
 
-    n_steps = hyperparams.get("n_steps", 1)
-    if n_steps == 1:
-        return {"replay_buffer_class": RewardComponentsReplayBuffer}
     gamma = hyperparams.get("gamma", inspect.signature(DTDPG).parameters["gamma"].default)
-    buffer_kwargs = {"n_steps": n_steps, "gamma": gamma}
-    return {"replay_buffer_class": RewardComponentsNStepReplayBuffer, "replay_buffer_kwargs": buffer_kwargs}
+    buffer_class, buffer_kwargs = reward_components_buffer(hyperparams.get("n_steps", 1), gamma)
+    return {"replay_buffer_class": buffer_class, "replay_buffer_kwargs": buffer_kwargs}
 
 
 def _stop_at_phase(index: int) -> Any:

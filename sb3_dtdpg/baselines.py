@@ -47,6 +47,7 @@ __all__ = [
     "TUNED_KWARGS",
     "algorithm_class",
     "base_learning_rate",
+    "check_hyperparams",
     "make_env",
     "make_model",
     "mission_callbacks",
@@ -99,7 +100,12 @@ def algorithm_class(algo: str) -> type[BaseAlgorithm]:
     return _CLASSES[_check_algo(algo)]
 
 
-def _check_hyperparams(algo: str, hyperparams: str) -> None:
+def check_hyperparams(algo: str, hyperparams: str) -> None:
+    """
+    :param algo: one of :data:`ALGORITHMS`
+    :param hyperparams: a name of :data:`HYPERPARAMS`
+    :raises ValueError: when the set is unknown, or not defined for the algorithm
+    """
     if hyperparams not in HYPERPARAMS:
         raise ValueError(f"hyperparams must be one of {HYPERPARAMS}, got {hyperparams!r}")
     if hyperparams == "tuned" and algo not in ("dtdpg", "ddpg"):
@@ -112,7 +118,7 @@ def base_learning_rate(algo: str, hyperparams: str = "paper") -> float:
     :param hyperparams: one of :data:`HYPERPARAMS`
     :return: the learning rate :func:`make_model` gives the algorithm when none is passed (a constant)
     """
-    _check_hyperparams(_check_algo(algo), hyperparams)
+    check_hyperparams(_check_algo(algo), hyperparams)
     if hyperparams == "tuned":
         return TUNED_KWARGS["learning_rate"]
     if algo == "ddpg":
@@ -177,7 +183,7 @@ def make_model(
     :return: the (untrained) model
     """
     algo = _check_algo(algo)
-    _check_hyperparams(algo, hyperparams)
+    check_hyperparams(algo, hyperparams)
     n_actions = int(np.prod(env.action_space.shape))
     options: dict[str, Any] = {}
     if algo == "dtdpg":

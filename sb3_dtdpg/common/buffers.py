@@ -138,3 +138,16 @@ class RewardComponentsNStepReplayBuffer(RewardComponentsReplayBuffer, NStepRepla
 
     def __init__(self, *args: Any, n_steps: int = 3, gamma: float = 0.99, **kwargs: Any):
         super().__init__(*args, n_steps=n_steps, gamma=gamma, **kwargs)
+
+
+def reward_components_buffer(n_steps: int, gamma: float) -> tuple[type[RewardComponentsReplayBuffer], dict[str, Any]]:
+    """
+    The replay buffer that stores reward components for an algorithm's return length.
+
+    :param n_steps: the algorithm's ``n_steps`` (1: one-step returns)
+    :param gamma: the algorithm's discount factor (used by the n-step sums)
+    :return: the buffer class and the ``replay_buffer_kwargs`` it needs
+    """
+    if n_steps > 1:
+        return RewardComponentsNStepReplayBuffer, {"n_steps": n_steps, "gamma": gamma}
+    return RewardComponentsReplayBuffer, {}

@@ -12,7 +12,7 @@ from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
-from sb3_dtdpg.common.buffers import RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
+from sb3_dtdpg.common.buffers import reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback, MissionLoggerCallback
 from sb3_dtdpg.common.noise import LinearDecayOUNoise
 from sb3_dtdpg.common.phases import Phase, default_phases, parse_phases, single_phase
@@ -163,11 +163,8 @@ class DTDPG(DDPG):
             mean = np.zeros(self.action_space.shape, dtype=np.float32)
             self.action_noise = LinearDecayOUNoise(mean, *schedule)
         if self.replay_buffer_class is None and any(phase.replay_handling == "relabel" for phase in self.phases[1:]):
-            if self.n_steps > 1:
-                self.replay_buffer_class = RewardComponentsNStepReplayBuffer
-                self.replay_buffer_kwargs = {"n_steps": self.n_steps, "gamma": self.gamma, **self.replay_buffer_kwargs}
-            else:
-                self.replay_buffer_class = RewardComponentsReplayBuffer
+            self.replay_buffer_class, buffer_kwargs = reward_components_buffer(self.n_steps, self.gamma)
+            self.replay_buffer_kwargs = {**buffer_kwargs, **self.replay_buffer_kwargs}
 
         if _init_setup_model:
             self._setup_model()

@@ -117,7 +117,7 @@ def run_compare(
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :return: the summary table (learners and planners)
     """
-    from sb3_dtdpg.baselines import ALGORITHMS, base_learning_rate
+    from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
     from sb3_dtdpg.experiments import plots, tables
 
     budget = _budget(budget)
@@ -130,7 +130,7 @@ def run_compare(
     if bad_modes:
         raise ValueError(f"modes: expected 'noma' and/or 'oma', got {bad_modes}")
     for algo in algos:
-        base_learning_rate(algo, hyperparams)  # a bad set, or one undefined for an algorithm, fails before any run
+        check_hyperparams(algo, hyperparams)  # before any run
     seeds = budget.seeds if seeds is None else seeds
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")
