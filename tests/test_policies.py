@@ -157,3 +157,30 @@ def test_bad_batch_norm_arguments(kwargs, match):
     env = gym.make("Pendulum-v1")
     with pytest.raises(ValueError, match=match):
         DTDPGPolicy(env.observation_space, env.action_space, lambda _: 1e-3, **kwargs)
+
+
+@pytest.mark.parametrize("actor_norm", ["batch", "layer", "none"])
+@pytest.mark.parametrize("critic_norm", ["batch", "layer", "none"])
+def test_normalisation_options_build_the_named_layers(actor_norm, critic_norm, tmp_path):
+    model = _model(policy_kwargs=dict(net_arch=[32, 16], actor_norm=actor_norm, critic_norm=critic_norm))
+    expected = {"batch": nn.BatchNorm1d, "layer": nn.LayerNorm, "none": None}
+    for actor in (model.actor, model.actor_target):
+        kinds = {type(m) for m in actor.modules() if isinstance(m, (nn.BatchNorm1d, nn.LayerNorm))}
+        assert kinds == ({expected[actor_norm]} if expected[actor_norm] else set())
+    for critic in (model.critic, model.critic_target):
+        has_input_bn = any(isinstance(m, StateActionBatchNorm) for m in critic.modules())
+        n_layer_norms = sum(isinstance(m, nn.LayerNorm) for m in critic.modules())
+        assert has_input_bn == (critic_norm == "batch")
+        assert n_layer_norms == (2 if critic_norm == "layer" else 0)  # one per hidden layer, none on Q's output
+    model.learn(150)
+    model.save(tmp_path / "model")
+    loaded = DTDPG.load(tmp_path / "model")
+    assert (loaded.policy.actor_norm, loaded.policy.critic_norm) == (actor_norm, critic_norm)
+    obs = np.zeros((1, 3), dtype=np.float32)
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+
+
+@pytest.mark.parametrize("key", ["actor_norm", "critic_norm"])
+def test_unknown_normalisation_is_an_error_naming_the_option(key):
+    with pytest.raises(ValueError, match=f"{key} must be one of .*'group'"):
+        _model(policy_kwargs={key: "group"})

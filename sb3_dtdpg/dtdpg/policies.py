@@ -39,6 +39,8 @@ class Actor(TD3Actor):
          dividing by 255.0 (True by default)
     :param batch_norm_momentum: Momentum of the running statistics (PyTorch convention: weight of the new batch)
     :param batch_norm_eps: Value added to the variance for numerical stability
+    :param norm: ``"batch"`` (the batch norm before ``tanh``), ``"layer"`` (a ``LayerNorm`` after each hidden
+        ``Linear``) or ``"none"``
     """
 
     def __init__(
@@ -52,6 +54,7 @@ class Actor(TD3Actor):
         normalize_images: bool = True,
         batch_norm_momentum: float = 0.01,
         batch_norm_eps: float = 1e-3,
+        norm: str = "batch",
     ):
         super().__init__(
             observation_space,
@@ -62,18 +65,43 @@ class Actor(TD3Actor):
             activation_fn=activation_fn,
             normalize_images=normalize_images,
         )
+        _check_norm("actor_norm", norm)
         self.batch_norm_momentum = batch_norm_momentum
         self.batch_norm_eps = batch_norm_eps
+        self.norm = norm
         # TD3's actor ends with Linear -> Tanh: insert the batch norm between them
         *layers, tanh = self.mu
         assert isinstance(tanh, nn.Tanh)
         action_dim = get_action_dim(self.action_space)
-        self.mu = nn.Sequential(*layers, nn.BatchNorm1d(action_dim, eps=batch_norm_eps, momentum=batch_norm_momentum), tanh)
+        if norm == "batch":
+            output_norm = nn.BatchNorm1d(action_dim, eps=batch_norm_eps, momentum=batch_norm_momentum)
+            self.mu = nn.Sequential(*layers, output_norm, tanh)
+        elif norm == "layer":
+            self.mu = nn.Sequential(*_with_layer_norm(layers), tanh)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
-        data.update(dict(batch_norm_momentum=self.batch_norm_momentum, batch_norm_eps=self.batch_norm_eps))
+        data.update(dict(batch_norm_momentum=self.batch_norm_momentum, batch_norm_eps=self.batch_norm_eps, norm=self.norm))
         return data
+
+
+NORMS: tuple[str, ...] = ("batch", "layer", "none")
+
+
+def _check_norm(name: str, value: str) -> None:
+    if value not in NORMS:
+        raise ValueError(f"{name} must be one of {NORMS}, got {value!r}")
+
+
+def _with_layer_norm(layers: list[nn.Module]) -> list[nn.Module]:
+    """A ``LayerNorm`` after every hidden ``Linear`` (before its activation); the output layer is left alone."""
+    linears = [i for i, layer in enumerate(layers) if isinstance(layer, nn.Linear)]
+    out: list[nn.Module] = []
+    for i, layer in enumerate(layers):
+        out.append(layer)
+        if isinstance(layer, nn.Linear) and i != linears[-1]:
+            out.append(nn.LayerNorm(layer.out_features))
+    return out
 
 
 class StateActionBatchNorm(nn.Module):
@@ -139,6 +167,8 @@ class Critic(ContinuousCritic):
         between the actor and the critic (this saves computation time)
     :param batch_norm_momentum: Momentum of the running statistics
     :param batch_norm_eps: Value added to the variance for numerical stability
+    :param norm: ``"batch"`` (:class:`StateActionBatchNorm` at the input), ``"layer"`` (a ``LayerNorm`` after each
+        hidden ``Linear``) or ``"none"``
     """
 
     def __init__(
@@ -154,6 +184,7 @@ class Critic(ContinuousCritic):
         share_features_extractor: bool = True,
         batch_norm_momentum: float = 0.01,
         batch_norm_eps: float = 1e-3,
+        norm: str = "batch",
     ):
         super().__init__(
             observation_space,
@@ -166,10 +197,16 @@ class Critic(ContinuousCritic):
             n_critics=n_critics,
             share_features_extractor=share_features_extractor,
         )
+        _check_norm("critic_norm", norm)
         action_dim = get_action_dim(self.action_space)
         for idx, q_net in enumerate(self.q_networks):
-            norm = StateActionBatchNorm(features_dim, action_dim, momentum=batch_norm_momentum, eps=batch_norm_eps)
-            self.q_networks[idx] = nn.Sequential(norm, *q_net)
+            if norm == "batch":
+                input_norm = StateActionBatchNorm(features_dim, action_dim, momentum=batch_norm_momentum, eps=batch_norm_eps)
+                self.q_networks[idx] = nn.Sequential(input_norm, *q_net)
+            elif norm == "layer":
+                self.q_networks[idx] = nn.Sequential(*_with_layer_norm(list(q_net)))
+            else:
+                continue
             self.add_module(f"qf{idx}", self.q_networks[idx])
 
 
@@ -203,6 +240,12 @@ class DTDPGPolicy(TD3Policy):
         (PyTorch convention: the weight of the new batch; 0.01 is Keras' default 0.99, as in sb3-contrib's CrossQ)
     :param batch_norm_eps: Value added to the variance for numerical stability (1e-3, Keras' default: a feature
         that is constant in the replay buffer, such as an arrived flag, is not amplified more than ~30x)
+    :param actor_norm: Normalisation in the actor: ``"batch"`` (the paper's design, a ``BatchNorm1d`` right before
+        the ``tanh``), ``"layer"`` (a ``LayerNorm`` after each hidden ``Linear``) or ``"none"`` (TD3's plain actor);
+        the alternatives are ablations (docs/BENCHMARKS.md)
+    :param critic_norm: Normalisation in the critic: ``"batch"`` (the paper's design, separate batch norms of
+        the state and the action at the input), ``"layer"`` (a ``LayerNorm`` after each hidden ``Linear``) or
+        ``"none"`` (SB3's plain critic)
     """
 
     actor: Actor
@@ -226,7 +269,13 @@ class DTDPGPolicy(TD3Policy):
         share_features_extractor: bool = False,
         batch_norm_momentum: float = 0.01,
         batch_norm_eps: float = 1e-3,
+        actor_norm: str = "batch",
+        critic_norm: str = "batch",
     ):
+        _check_norm("actor_norm", actor_norm)
+        _check_norm("critic_norm", critic_norm)
+        self.actor_norm = actor_norm
+        self.critic_norm = critic_norm
         if not 0.0 < batch_norm_momentum <= 1.0:
             raise ValueError(f"batch_norm_momentum must be in (0, 1], got {batch_norm_momentum!r}")
         if not batch_norm_eps > 0.0:
@@ -254,7 +303,14 @@ class DTDPGPolicy(TD3Policy):
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
-        data.update(dict(batch_norm_momentum=self.batch_norm_momentum, batch_norm_eps=self.batch_norm_eps))
+        data.update(
+            dict(
+                batch_norm_momentum=self.batch_norm_momentum,
+                batch_norm_eps=self.batch_norm_eps,
+                actor_norm=self.actor_norm,
+                critic_norm=self.critic_norm,
+            )
+        )
         return data
 
     def set_training_mode(self, mode: bool) -> None:
@@ -273,15 +329,21 @@ class DTDPGPolicy(TD3Policy):
 
     def make_actor(self, features_extractor: BaseFeaturesExtractor | None = None) -> Actor:
         actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)
-        return Actor(**actor_kwargs, batch_norm_momentum=self.batch_norm_momentum, batch_norm_eps=self.batch_norm_eps).to(
-            self.device
-        )
+        return Actor(
+            **actor_kwargs,
+            batch_norm_momentum=self.batch_norm_momentum,
+            batch_norm_eps=self.batch_norm_eps,
+            norm=self.actor_norm,
+        ).to(self.device)
 
     def make_critic(self, features_extractor: BaseFeaturesExtractor | None = None) -> Critic:
         critic_kwargs = self._update_features_extractor(self.critic_kwargs, features_extractor)
-        return Critic(**critic_kwargs, batch_norm_momentum=self.batch_norm_momentum, batch_norm_eps=self.batch_norm_eps).to(
-            self.device
-        )
+        return Critic(
+            **critic_kwargs,
+            batch_norm_momentum=self.batch_norm_momentum,
+            batch_norm_eps=self.batch_norm_eps,
+            norm=self.critic_norm,
+        ).to(self.device)
 
 
 MlpPolicy = DTDPGPolicy

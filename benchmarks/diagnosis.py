@@ -1,0 +1,255 @@
+"""What limits DT-DPG's learning on NomaRadioMap-v0: ablations of phase 1 ("destination") on the same seeds.
+
+Each configuration is a change to one base set-up (``--base``: the tuned settings, ``sb3_dtdpg.baselines.TUNED_KWARGS``);
+every run trains phase 1 of the curriculum (the "destination" reward) on ``mall`` for at most ``--episodes``
+episodes and records, per episode, the training success (with exploration noise), and every ``--eval-every``
+episodes the *deterministic* policy's success on ``--eval-missions`` fixed missions (radio-map channel), its mean
+mission time and the share of saturated action components (``|a| > 0.99``). A run stops when its deterministic
+success reaches ``--stop-at`` on two evaluations in a row, or at ``--episodes``.
+
+Figures per run: ``train95`` (the first episode at which the training success over the last 20 episodes is
+>= 95 %, the curriculum's early-transfer rule) and ``eval95`` (the first evaluation at which the deterministic
+policy brings both robots home in >= 95 % of the fixed missions).
+
+    python benchmarks/diagnosis.py --configs base no_norm sac --seeds 0 1       # 2 processes
+    python benchmarks/diagnosis.py --list                                        # the configurations
+
+Runs are independent processes (one torch thread each), written to ``<out>/<config>_seed<k>.json`` as they finish;
+finished runs are skipped when the command is repeated, so an interrupted sweep resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import multiprocessing as mp
+import os
+import time
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import Any
+
+import numpy as np
+
+#: Changes to the base set-up. Keys: ``algo`` (dtdpg, ddpg, td3, sac), ``kwargs`` (algorithm kwargs merged into the
+#: base, ``policy_kwargs`` merged key by key), ``phase`` (fields of the phase-1 :class:`Phase`: the OU schedule),
+#: ``noise`` ("ou" or "normal" with ``noise_sigma``), ``env`` (env kwargs).
+CONFIGS: dict[str, dict[str, Any]] = {
+    "base": {},
+    # exploration
+    "ou0.2": {"phase": {"sigma": 0.2, "final_sigma": 0.05}},
+    "ou0.8": {"phase": {"sigma": 0.8, "final_sigma": 0.1}},
+    "ou_fast_decay": {"phase": {"sigma": 0.5, "final_sigma": 0.05, "decay_episodes": 100}},
+    "normal0.2": {"noise": "normal", "noise_sigma": 0.2},
+    # normalisation
+    "no_norm": {"kwargs": {"policy_kwargs": {"actor_norm": "none", "critic_norm": "none"}}},
+    "actor_bn_only": {"kwargs": {"policy_kwargs": {"critic_norm": "none"}}},
+    "critic_bn_only": {"kwargs": {"policy_kwargs": {"actor_norm": "none"}}},
+    "layer_norm": {"kwargs": {"policy_kwargs": {"actor_norm": "layer", "critic_norm": "layer"}}},
+    "critic_ln": {"kwargs": {"policy_kwargs": {"critic_norm": "layer"}}},
+    # returns
+    "gamma0.99": {"kwargs": {"gamma": 0.99}},
+    "gamma0.9": {"kwargs": {"gamma": 0.9}},
+    "nstep1": {"kwargs": {"n_steps": 1}},
+    "nstep5": {"kwargs": {"n_steps": 5}},
+    # optimisation
+    "lr3e-4": {"kwargs": {"learning_rate": 3e-4}},
+    "tau0.02": {"kwargs": {"tau": 0.02}},
+    "batch256": {"kwargs": {"batch_size": 256}},
+    "net256": {"kwargs": {"policy_kwargs": {"net_arch": [256, 256]}}},
+    "utd2": {"kwargs": {"gradient_steps": 2}},
+    "ls500": {"kwargs": {"learning_starts": 500}},
+    # rewards
+    "geodesic": {"env": {"inducing": "geodesic"}},
+    # anchors: SB3's own algorithms with the same shared settings (plain MLPs)
+    "sac": {"algo": "sac"},
+    "td3": {"algo": "td3", "noise": "normal", "noise_sigma": 0.1},
+    "ddpg": {"algo": "ddpg", "noise": "normal", "noise_sigma": 0.1},
+}
+
+
+def build_model(config: dict[str, Any], seed: int, base: dict[str, Any], episodes: int, env: Any) -> Any:
+    """The model of one configuration (not yet trained)."""
+    from stable_baselines3 import DDPG, SAC, TD3
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    from sb3_dtdpg import DTDPG
+    from sb3_dtdpg.common.phases import Phase
+
+    algo = config.get("algo", "dtdpg")
+    kwargs = copy.deepcopy(base)
+    for key, value in config.get("kwargs", {}).items():
+        if key == "policy_kwargs":
+            kwargs["policy_kwargs"] = {**kwargs.get("policy_kwargs", {}), **value}
+        else:
+            kwargs[key] = value
+    n_actions = env.action_space.shape[0]
+    if config.get("noise") == "normal":
+        kwargs["action_noise"] = NormalActionNoise(np.zeros(n_actions), config["noise_sigma"] * np.ones(n_actions))
+    if algo == "dtdpg":
+        phase = {"name": "destination", "n_episodes": episodes, "sigma": 0.5, "final_sigma": 0.1, "decay_episodes": 500}
+        phase.update(config.get("phase", {}))
+        if "action_noise" in kwargs:
+            phase.update(sigma=None, final_sigma=None, decay_episodes=None)
+        return DTDPG("MlpPolicy", env, seed=seed, phases=[Phase(**phase)], **kwargs)
+    if algo == "sac":
+        # SAC's own defaults for what is not shared: a squashed Gaussian policy, two critics, automatic entropy
+        policy_kwargs = {k: v for k, v in kwargs.pop("policy_kwargs", {}).items() if k == "net_arch"}
+        return SAC("MlpPolicy", env, seed=seed, policy_kwargs=policy_kwargs, **kwargs)
+    policy_kwargs = {k: v for k, v in kwargs.pop("policy_kwargs", {}).items() if k == "net_arch"}
+    cls = {"td3": TD3, "ddpg": DDPG}[algo]
+    return cls("MlpPolicy", env, seed=seed, policy_kwargs=policy_kwargs, **kwargs)
+
+
+def evaluate_deterministic(model: Any, env: Any, n_missions: int) -> dict[str, float]:
+    """Deterministic policy on fixed missions (seeds 10 000 + i): success rate, mean time, saturation share."""
+    successes, times, saturated, components = 0, [], 0, 0
+    for i in range(n_missions):
+        obs, _ = env.reset(seed=10_000 + i)
+        done, steps = False, 0
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            saturated += int((np.abs(action) > 0.99).sum())
+            components += action.size
+            obs, _, terminated, truncated, info = env.step(action)
+            steps += 1
+            done = terminated or truncated
+        successes += bool(info["is_success"])
+        times.append(steps)
+    return {"success": successes / n_missions, "mean_steps": float(np.mean(times)), "saturated": saturated / components}
+
+
+def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+    """Train one configuration on one seed; return its curves and figures."""
+    import gymnasium as gym
+    import torch as th
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    import noma_radiomap  # noqa: F401
+    from sb3_dtdpg.baselines import TUNED_KWARGS
+
+    th.set_num_threads(1)
+    config = CONFIGS[name]
+    env_kwargs = {"reward_phase": "destination", **config.get("env", {})}
+    env = gym.make(args.env, **env_kwargs)
+    eval_env = gym.make(args.env, **env_kwargs)
+    base = copy.deepcopy(TUNED_KWARGS) if args.base == "tuned" else {}
+    model = build_model(config, seed, base, args.episodes, env)
+    record: dict[str, Any] = {"config": name, "seed": seed, "train_success": [], "evals": []}
+    start = time.perf_counter()
+
+    class Recorder(BaseCallback):
+        def _on_step(self) -> bool:
+            for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+                if not done:
+                    continue
+                record["train_success"].append(bool(info.get("is_success", False)))
+                n = len(record["train_success"])
+                if n % args.eval_every == 0:
+                    result = evaluate_deterministic(self.model, eval_env, args.eval_missions)
+                    result.update(episode=n, timesteps=self.num_timesteps, seconds=time.perf_counter() - start)
+                    record["evals"].append(result)
+                    recent = [e["success"] for e in record["evals"][-2:]]
+                    if len(recent) == 2 and min(recent) >= args.stop_at:
+                        return False
+                if n >= args.episodes:
+                    return False
+            return True
+
+    model.learn(10**9, callback=Recorder())
+    record["seconds"] = time.perf_counter() - start
+    record["timesteps"] = int(model.num_timesteps)
+    record.update(figures(record["train_success"], record["evals"]))
+    return record
+
+
+def figures(train_success: list[bool], evals: list[dict[str, Any]], window: int = 20) -> dict[str, Any]:
+    """``train95``: first episode with >= 95 % training success over ``window`` episodes; ``eval95``: first
+    evaluation episode with >= 95 % deterministic success (None: not reached)."""
+    s = np.asarray(train_success, dtype=float)
+    train95 = None
+    if len(s) >= window:
+        rolling = np.convolve(s, np.ones(window) / window, mode="valid")
+        hits = np.flatnonzero(rolling >= 0.95 - 1e-9)
+        train95 = int(hits[0] + window) if hits.size else None
+    eval95 = next((e["episode"] for e in evals if e["success"] >= 0.95), None)
+    best_eval = max((e["success"] for e in evals), default=float("nan"))
+    return {"train95": train95, "eval95": eval95, "best_eval_success": best_eval, "episodes": len(s)}
+
+
+def summary_rows(out: str, names: list[str], seeds: list[int]) -> list[str]:
+    """One Markdown row per configuration: train95 / eval95 per seed, best deterministic success, wall time."""
+    rows = [
+        "| config | train95 per seed | eval95 per seed | best det. success | saturated (last eval) | wall s |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name in names:
+        results = []
+        for seed in seeds:
+            path = os.path.join(out, f"{name}_seed{seed}.json")
+            if os.path.exists(path):
+                with open(path) as f:
+                    results.append(json.load(f))
+        if not results:
+            continue
+
+        def cells(values: list[Any]) -> str:
+            return " / ".join("-" if v is None else f"{v:.2f}" if isinstance(v, float) else str(v) for v in values)
+
+        saturated = [r["evals"][-1]["saturated"] if r["evals"] else None for r in results]
+        rows.append(
+            f"| {name} | {cells([r['train95'] for r in results])} | {cells([r['eval95'] for r in results])} "
+            f"| {cells([r['best_eval_success'] for r in results])} | {cells(saturated)} "
+            f"| {cells([str(round(r['seconds'])) for r in results])} |"
+        )
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--configs", nargs="+", default=["base"], help="configurations to run (see --list)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument("--episodes", type=int, default=300, help="phase-1 episode budget per run")
+    parser.add_argument("--eval-every", type=int, default=25, help="episodes between deterministic evaluations")
+    parser.add_argument("--eval-missions", type=int, default=20, help="fixed missions per evaluation")
+    parser.add_argument("--stop-at", type=float, default=0.95, help="stop after two evaluations at this success")
+    parser.add_argument("--base", choices=["tuned", "defaults"], default="tuned", help="the set-up the configs change")
+    parser.add_argument("--env", default="NomaRadioMap-v0")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", default="results/diagnosis")
+    parser.add_argument("--list", action="store_true", help="print the configurations and exit")
+    args = parser.parse_args()
+    if args.list:
+        for name, config in CONFIGS.items():
+            print(f"{name:16s} {config}")
+        return
+    unknown = sorted(set(args.configs) - set(CONFIGS))
+    if unknown:
+        parser.error(f"unknown configuration(s) {unknown}; known: {sorted(CONFIGS)}")
+    os.makedirs(args.out, exist_ok=True)
+    todo = [
+        (n, s) for n in args.configs for s in args.seeds if not os.path.exists(os.path.join(args.out, f"{n}_seed{s}.json"))
+    ]
+    print(f"{len(todo)} runs to do ({len(args.configs) * len(args.seeds) - len(todo)} already done) -> {args.out}")
+    with ProcessPoolExecutor(max_workers=args.workers, mp_context=mp.get_context("spawn")) as pool:
+        jobs: dict[Future, tuple[str, int]] = {pool.submit(run, n, s, args): (n, s) for n, s in todo}
+        while jobs:
+            done, _ = wait(jobs, return_when=FIRST_COMPLETED)
+            for future in done:
+                name, seed = jobs.pop(future)
+                record = future.result()
+                path = os.path.join(args.out, f"{name}_seed{seed}.json")
+                with open(path + ".tmp", "w") as f:
+                    json.dump(record, f)
+                os.replace(path + ".tmp", path)
+                evals = " ".join(f"{e['success']:.2f}" for e in record["evals"])
+                print(
+                    f"{time.strftime('%H:%M:%S')} {name} seed {seed}: train95 {record['train95']} eval95 {record['eval95']} "
+                    f"({record['episodes']} ep, {record['seconds']:.0f} s); det. success per eval: {evals}",
+                    flush=True,
+                )
+    print("\n".join(summary_rows(args.out, args.configs, args.seeds)))
+
+
+if __name__ == "__main__":
+    main()
