@@ -61,6 +61,12 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "ls500": {"kwargs": {"learning_starts": 500}},
     # rewards
     "geodesic": {"env": {"inducing": "geodesic"}},
+    # extensions (not the paper's method): replay seeded with the comm-aware planner's episodes
+    "demos20": {"demos": 20},
+    "demos20_ls500": {"demos": 20, "kwargs": {"learning_starts": 500}},
+    # extension: a goal-conditioned observation (noma_radiomap.wrappers.RelativeGoalObservation)
+    "relgoal": {"wrapper": "relative_goal"},
+    "relgoal_sac": {"algo": "sac", "wrapper": "relative_goal"},
     # anchors: SB3's own algorithms with the same shared settings (plain MLPs)
     "sac": {"algo": "sac"},
     "td3": {"algo": "td3", "noise": "normal", "noise_sigma": 0.1},
@@ -101,9 +107,10 @@ def build_model(config: dict[str, Any], seed: int, base: dict[str, Any], episode
     return cls("MlpPolicy", env, seed=seed, policy_kwargs=policy_kwargs, **kwargs)
 
 
-def evaluate_deterministic(model: Any, env: Any, n_missions: int) -> dict[str, float]:
-    """Deterministic policy on fixed missions (seeds 10 000 + i): success rate, mean time, saturation share."""
-    successes, times, saturated, components = 0, [], 0, 0
+def evaluate_deterministic(model: Any, env: Any, n_missions: int) -> dict[str, Any]:
+    """Deterministic policy on fixed missions (seeds 10 000 + i): success rate, mean time, saturation share, and
+    for each robot that did not arrive its destination and final distance to it."""
+    successes, times, saturated, components, misses = 0, [], 0, 0, []
     for i in range(n_missions):
         obs, _ = env.reset(seed=10_000 + i)
         done, steps = False, 0
@@ -116,7 +123,16 @@ def evaluate_deterministic(model: Any, env: Any, n_missions: int) -> dict[str, f
             done = terminated or truncated
         successes += bool(info["is_success"])
         times.append(steps)
-    return {"success": successes / n_missions, "mean_steps": float(np.mean(times)), "saturated": saturated / components}
+        base = env.unwrapped
+        for u in np.flatnonzero(~base.arrived):
+            distance = float(np.hypot(*(base.positions[u] - base.destinations[u])))
+            misses.append([int(u), base.destinations[u].tolist(), base.positions[u].round(1).tolist(), round(distance, 1)])
+    return {
+        "success": successes / n_missions,
+        "mean_steps": float(np.mean(times)),
+        "saturated": saturated / components,
+        "misses": misses,
+    }
 
 
 def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
@@ -133,6 +149,10 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     env_kwargs = {"reward_phase": "destination", **config.get("env", {})}
     env = gym.make(args.env, **env_kwargs)
     eval_env = gym.make(args.env, **env_kwargs)
+    if config.get("wrapper") == "relative_goal":
+        from noma_radiomap.wrappers import RelativeGoalObservation
+
+        env, eval_env = RelativeGoalObservation(env), RelativeGoalObservation(eval_env)
     base = copy.deepcopy(TUNED_KWARGS) if args.base == "tuned" else {}
     model = build_model(config, seed, base, args.episodes, env)
     record: dict[str, Any] = {"config": name, "seed": seed, "train_success": [], "evals": []}
@@ -149,6 +169,8 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
                     result = evaluate_deterministic(self.model, eval_env, args.eval_missions)
                     result.update(episode=n, timesteps=self.num_timesteps, seconds=time.perf_counter() - start)
                     record["evals"].append(result)
+                    with open(os.path.join(args.out, f"{name}_seed{seed}.log"), "a") as log:
+                        print(json.dumps({k: v for k, v in result.items() if k != "misses"}), file=log)
                     recent = [e["success"] for e in record["evals"][-2:]]
                     if len(recent) == 2 and min(recent) >= args.stop_at:
                         return False
@@ -156,8 +178,15 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
                     return False
             return True
 
-    model.learn(10**9, callback=Recorder())
+    callbacks: list[BaseCallback] = [Recorder()]
+    if config.get("demos"):
+        from noma_radiomap.planners import CommAwarePlanner
+        from sb3_dtdpg.common.demonstrations import DemonstrationCallback
+
+        callbacks.insert(0, DemonstrationCallback(CommAwarePlanner(), config["demos"]))
+    model.learn(10**9, callback=callbacks)
     record["seconds"] = time.perf_counter() - start
+    model.save(os.path.join(args.out, f"{name}_seed{seed}"))
     record["timesteps"] = int(model.num_timesteps)
     record.update(figures(record["train_success"], record["evals"]))
     return record

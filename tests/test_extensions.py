@@ -1,0 +1,92 @@
+"""The learning extensions: the goal-conditioned observation wrapper and replay seeded with demonstrations."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from stable_baselines3 import DDPG
+from stable_baselines3.common.env_util import make_vec_env
+
+from noma_radiomap.planners import ShortestPathPlanner
+from noma_radiomap.wrappers import RelativeGoalObservation
+from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
+from sb3_dtdpg.common.demonstrations import DemonstrationCallback
+
+
+def _small(**kwargs) -> gym.Env:
+    return gym.make("NomaRadioMap-v0", scenario="small", **kwargs)
+
+
+def test_relative_goal_features_point_at_the_destination():
+    env = RelativeGoalObservation(_small(), distance_scale=4.0)
+    obs, _ = env.reset(seed=3)
+    base = env.unwrapped
+    assert obs.shape == (9 * base.n_robots,) and env.observation_space.contains(obs)
+    plain_obs, _ = _small().reset(seed=3)
+    np.testing.assert_array_equal(obs[: 6 * base.n_robots], plain_obs)
+    for u, (ux, uy, dist) in enumerate(obs[6 * base.n_robots :].reshape(-1, 3)):
+        offset = base.destinations[u] - base.positions[u]
+        d = np.hypot(*offset)
+        np.testing.assert_allclose([ux, uy], offset / d, rtol=1e-6)
+        assert dist == pytest.approx(min(d / 4.0, 1.0), rel=1e-6)
+
+
+def test_relative_goal_features_are_zero_once_arrived():
+    env = RelativeGoalObservation(_small())
+    env.reset(seed=0)
+    planner = ShortestPathPlanner()
+    planner.reset(env.unwrapped)
+    obs, done = None, False
+    while not done:
+        obs, _, terminated, truncated, _ = env.step(planner.act(env.unwrapped, obs))
+        done = terminated or truncated
+        arrived = env.unwrapped.arrived
+        features = obs[-3 * len(arrived) :].reshape(-1, 3)
+        assert np.all(features[arrived] == 0) and np.all(features[~arrived, 2] > 0)
+    assert terminated and arrived.all()
+
+
+def test_relative_goal_wrapper_passes_the_env_checker_and_keeps_reward_phases():
+    env = RelativeGoalObservation(_small())
+    check_env(env, skip_render_check=True)
+    env.get_wrapper_attr("set_reward_phase")("mqi")
+    assert env.unwrapped.reward_phase == "mqi"
+    with pytest.raises(ValueError, match="distance_scale"):
+        RelativeGoalObservation(_small(), distance_scale=0.0)
+
+
+def test_demonstrations_fill_the_replay_buffer_before_training():
+    env = make_vec_env(lambda: _small(reward_phase="destination"), n_envs=1, seed=0)
+    model = DDPG(
+        "MlpPolicy",
+        env,
+        learning_starts=10_000,
+        replay_buffer_class=RewardComponentsReplayBuffer,
+        policy_kwargs=dict(net_arch=[8]),
+        seed=0,
+    )
+    demos = DemonstrationCallback(ShortestPathPlanner(), n_episodes=3)
+    model.learn(5, callback=demos)
+    buffer = model.replay_buffer
+    assert demos.transitions == buffer.pos - 5 and model.num_timesteps == 5
+    stored = slice(0, demos.transitions)
+    # three complete, successful episodes: three terminal transitions, each with the success reward
+    assert buffer.dones[stored].sum() == 3 and buffer.timeouts[stored].sum() == 0
+    components = buffer.reward_components[stored, 0]
+    assert (components[:, list(buffer.component_keys).index("success")] > 0).sum() == 3
+    # the stored rewards are the env's destination-phase rewards, recomputable from the components
+    weights = env.env_method("reward_weights", "destination")[0]
+    recomputed = components @ np.array([weights[name] for name in buffer.component_keys])
+    np.testing.assert_allclose(buffer.rewards[stored, 0], recomputed, rtol=1e-5)
+    # a second learn() does not seed again
+    model.learn(5, callback=demos, reset_num_timesteps=False)
+    assert buffer.pos == demos.transitions + 10
+
+
+def test_demonstrations_need_one_env():
+    env = make_vec_env(lambda: _small(), n_envs=2, seed=0)
+    model = DDPG("MlpPolicy", env, learning_starts=100, policy_kwargs=dict(net_arch=[8]))
+    with pytest.raises(ValueError, match="one env"):
+        model.learn(4, callback=DemonstrationCallback(ShortestPathPlanner(), n_episodes=1))
+    with pytest.raises(ValueError, match="n_episodes"):
+        DemonstrationCallback(ShortestPathPlanner(), n_episodes=0)
