@@ -221,7 +221,7 @@ class DTDPGPolicy(TD3Policy):
     :param action_space: Action space
     :param lr_schedule: Learning rate schedule (could be constant)
     :param net_arch: The specification of the policy and value networks
-        (default: ``[128, 64]``, the paper's "64-128 nodes per hidden layer")
+        (default: ``[128, 128]``, within the paper's "64-128 nodes per hidden layer")
     :param activation_fn: Activation function (ReLU in the paper)
     :param features_extractor_class: Features extractor to use.
     :param features_extractor_kwargs: Keyword arguments
@@ -290,7 +290,7 @@ class DTDPGPolicy(TD3Policy):
             observation_space,
             action_space,
             lr_schedule,
-            net_arch=[128, 64] if net_arch is None else net_arch,
+            net_arch=[128, 128] if net_arch is None else net_arch,
             activation_fn=activation_fn,
             features_extractor_class=features_extractor_class,
             features_extractor_kwargs=features_extractor_kwargs,

@@ -1,0 +1,203 @@
+"""The learning targets on a mission env: test success and MQI after the paper's budget of training episodes.
+
+For each seed and method, one run trains for ``--episodes`` episodes in all (the paper's 500; DT-DPG: phase 1
+"destination" until >= 95 % success over the last 20 episodes, then phase 2 "mqi" for the rest, replay relabelled;
+DDPG: the paper's baseline, plain MLPs, constant OU noise, the "combined" reward), on the radio-map channel, then
+the final policy is tested on 20 missions with Rayleigh fading (seeds 10 000 + i, the same missions for every run
+and for the comm-aware planner, whose MQI is the yardstick). Both methods use the same shared settings
+(``--hyperparams``).
+
+``--observation goal`` wraps every env (training and test) in
+:class:`noma_radiomap.wrappers.RelativeGoalObservation`: the goal-conditioned observation extension, reported in
+its own rows; ``paper`` is the paper's observation.
+
+    python benchmarks/targets.py --methods dtdpg ddpg --seeds 0 1 2 3 4 --observation goal
+    python benchmarks/targets.py --methods dtdpg --seeds 0 --episodes 30 --eval-episodes 2   # smoke run
+
+Runs are independent processes (one torch thread each); each writes ``<out>/<method>_<observation>_seed<k>.json``
+when it finishes, and finished runs are skipped when the command is repeated. The summary (per seed, and the
+paired DT-DPG - DDPG differences with a 95 % t-interval over seeds) is printed and written to ``<out>/summary.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import time
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import Any
+
+import numpy as np
+
+
+def _make_env(env_id: str, observation: str, **kwargs: Any) -> Any:
+    import gymnasium as gym
+    from stable_baselines3.common.monitor import Monitor
+
+    import noma_radiomap  # noqa: F401
+    from noma_radiomap.wrappers import RelativeGoalObservation
+
+    env = gym.make(env_id, **kwargs)
+    if observation == "goal":
+        env = RelativeGoalObservation(env)
+    return Monitor(env, info_keywords=("is_success",))
+
+
+def run(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+    """Train one method on one seed for the episode budget; test the final policy."""
+    import torch as th
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from sb3_dtdpg.baselines import make_model, reward_phase
+    from sb3_dtdpg.common.phases import default_phases
+    from sb3_dtdpg.evaluation import evaluate
+
+    th.set_num_threads(1)
+    env = _make_env(args.env, args.observation, reward_phase=reward_phase(method), **args.env_kwargs)
+    extra: dict[str, Any] = {}
+    if method == "dtdpg":
+        extra["phases"] = default_phases(destination_episodes=args.episodes)
+    model = make_model(method, env, seed=seed, hyperparams=args.hyperparams, **extra)
+    record: dict[str, Any] = {"method": method, "seed": seed, "observation": args.observation, "success": [], "mqi": []}
+    start = time.perf_counter()
+
+    class Budget(BaseCallback):
+        """Stops after the episode budget; records training success and MQI per episode."""
+
+        def _on_step(self) -> bool:
+            for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+                if done:
+                    record["success"].append(bool(info.get("is_success", False)))
+                    record["mqi"].append(float(info.get("mqi", np.nan)))
+            return len(record["success"]) < args.episodes
+
+    model.learn(10**9, callback=Budget())
+    record["seconds"] = time.perf_counter() - start
+    record["timesteps"] = int(model.num_timesteps)
+    if method == "dtdpg":
+        history = model.curriculum_state["history"]
+        first = history[0]
+        record["phase1_episodes"] = int(first["episodes"])
+        record["phase1_reached_95"] = len(history) > 1 and first.get("reason") == "success rate"
+    test_env = _make_env(args.env, args.observation, channel="rayleigh", reward_phase="mqi", **args.env_kwargs)
+    result = evaluate(model, test_env, n_episodes=args.eval_episodes, seed=10_000)
+    summary = result.summary()
+    record.update(test_success=summary["success_rate"], test_mqi=summary["mqi"], test_mqi_ci=summary["mqi_ci"])
+    record["test_mqi_per_mission"] = [float(e["mqi"]) for e in result.episodes]
+    return record
+
+
+def planner_mqi(args: argparse.Namespace) -> dict[str, Any]:
+    """The comm-aware planner on the same test missions."""
+    from noma_radiomap.planners import CommAwarePlanner
+    from sb3_dtdpg.evaluation import evaluate
+
+    test_env = _make_env(args.env, "paper", channel="rayleigh", reward_phase="mqi", **args.env_kwargs)
+    summary = evaluate(CommAwarePlanner(), test_env, n_episodes=args.eval_episodes, seed=10_000).summary()
+    return {"test_success": summary["success_rate"], "test_mqi": summary["mqi"], "test_mqi_ci": summary["mqi_ci"]}
+
+
+def _t_interval(values: list[float]) -> tuple[float, float]:
+    from scipy import stats
+
+    x = np.asarray(values, dtype=float)
+    if len(x) < 2:
+        return float(x.mean()), float("nan")
+    return float(x.mean()), float(stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)))
+
+
+def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argparse.Namespace) -> list[str]:
+    """Markdown lines: one row per method and seed, the means, and the paired DT-DPG - DDPG differences."""
+    lines = [
+        f"Test: {args.eval_episodes} Rayleigh missions; comm-aware planner {planner['test_mqi']:.1f} MQI, "
+        f"{planner['test_success']:.0%} success; {args.episodes} training episodes per run; observation "
+        f"{args.observation}.",
+        "",
+        "| method | seed | phase-1 episodes to 95 % | test success | test MQI | MQI / planner | train wall s |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    by_method: dict[str, dict[int, dict[str, Any]]] = {}
+    for r in sorted(records, key=lambda r: (r["method"], r["seed"])):
+        by_method.setdefault(r["method"], {})[r["seed"]] = r
+        phase1 = "-" if r["method"] != "dtdpg" else (str(r["phase1_episodes"]) if r["phase1_reached_95"] else "not reached")
+        lines.append(
+            f"| {r['method']} | {r['seed']} | {phase1} | {r['test_success']:.0%} "
+            f"| {r['test_mqi']:.1f} ± {r['test_mqi_ci']:.1f} | {r['test_mqi'] / planner['test_mqi']:.3f} "
+            f"| {r['seconds']:.0f} |"
+        )
+    for method, runs in by_method.items():
+        success, ci_s = _t_interval([r["test_success"] for r in runs.values()])
+        mqi, ci_m = _t_interval([r["test_mqi"] for r in runs.values()])
+        lines.append(
+            f"| **{method} mean** | {len(runs)} seeds | | {success:.0%} ± {ci_s:.0%} | {mqi:.1f} ± {ci_m:.1f} "
+            f"| {mqi / planner['test_mqi']:.3f} | |"
+        )
+    if "dtdpg" in by_method and "ddpg" in by_method:
+        seeds = sorted(set(by_method["dtdpg"]) & set(by_method["ddpg"]))
+        if seeds:
+            d_success = [by_method["dtdpg"][s]["test_success"] - by_method["ddpg"][s]["test_success"] for s in seeds]
+            d_mqi = [by_method["dtdpg"][s]["test_mqi"] - by_method["ddpg"][s]["test_mqi"] for s in seeds]
+            (ms, cs), (mm, cm) = _t_interval(d_success), _t_interval(d_mqi)
+            lines += [
+                "",
+                f"Paired DT-DPG - DDPG over {len(seeds)} seeds (mean ± 95 % t-interval): success {ms * 100:+.0f} ± "
+                f"{cs * 100:.0f} points, MQI {mm:+.1f} ± {cm:.1f}.",
+            ]
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--methods", nargs="+", default=["dtdpg", "ddpg"], choices=["dtdpg", "ddpg"])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    parser.add_argument("--episodes", type=int, default=500, help="training episodes per run, both phases together")
+    parser.add_argument("--eval-episodes", type=int, default=20, help="test missions with Rayleigh fading")
+    parser.add_argument("--observation", choices=["paper", "goal"], default="paper")
+    parser.add_argument("--hyperparams", choices=["tuned", "paper"], default="tuned", help="the shared settings")
+    parser.add_argument("--env", default="NomaRadioMap-v0")
+    parser.add_argument("--env-kwargs", type=json.loads, default={}, help='e.g. \'{"scenario": "small"}\'')
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", default="results/targets")
+    args = parser.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+
+    def path(method: str, seed: int) -> str:
+        return os.path.join(args.out, f"{method}_{args.observation}_seed{seed}.json")
+
+    todo = [(m, s) for m in args.methods for s in args.seeds if not os.path.exists(path(m, s))]
+    print(f"{len(todo)} runs to do -> {args.out}", flush=True)
+    with ProcessPoolExecutor(max_workers=args.workers, mp_context=mp.get_context("spawn")) as pool:
+        planner_job = pool.submit(planner_mqi, args)
+        jobs: dict[Future, tuple[str, int]] = {pool.submit(run, m, s, args): (m, s) for m, s in todo}
+        while jobs:
+            done, _ = wait(jobs, return_when=FIRST_COMPLETED)
+            for future in done:
+                method, seed = jobs.pop(future)
+                record = future.result()
+                with open(path(method, seed) + ".tmp", "w") as f:
+                    json.dump(record, f)
+                os.replace(path(method, seed) + ".tmp", path(method, seed))
+                print(
+                    f"{time.strftime('%H:%M:%S')} {method} seed {seed}: test success {record['test_success']:.0%}, "
+                    f"MQI {record['test_mqi']:.1f} ({record['seconds']:.0f} s"
+                    + (f", phase 1 {record['phase1_episodes']} ep." if method == "dtdpg" else "")
+                    + ")",
+                    flush=True,
+                )
+        planner = planner_job.result()
+    records = []
+    for m in args.methods:
+        for s in args.seeds:
+            if os.path.exists(path(m, s)):
+                with open(path(m, s)) as f:
+                    records.append(json.load(f))
+    lines = summarize(records, planner, args)
+    with open(os.path.join(args.out, f"summary_{args.observation}.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
