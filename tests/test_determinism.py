@@ -13,6 +13,7 @@ import pytest
 import torch as th
 
 import noma_radiomap  # noqa: F401  (registers the ids)
+from noma_radiomap.planners import CommAwarePlanner, ShortestPathPlanner, channel_maps
 from sb3_dtdpg import DTDPG
 from sb3_dtdpg.common.phases import Phase
 
@@ -41,6 +42,15 @@ EXPECTED_ROLLOUTS = {
     "small": "4fae27defa682ea8a11516fc36d51279234c83b9d491f6d654569a9b16cc77b1",
     "small_combined_geodesic": "c1f9a245226986aa959a9b9d3fcd9f4920bcaeecc1781dc8a5b8d4a58e5fd839",
     "mqi": "a19de226092718a6bd04da1dad5e21b6e6fda99c3b23a69e1c4c79e8238d14fe",
+}
+EXPECTED_MAPS = {
+    "mall": "cac89913551549bfed886c018962e2da4fc58a760951ae1cbe4d7d3fb2c17bbc",
+    "small": "76470d7a6d7d5b1eecd5de568b595015ba383f215442b57d2d82c462a7664eea",
+}
+EXPECTED_PLANNERS = {
+    "shortest": "362e0cd9e9c043c96e2662dd393a552da3d44c753952ddf8d0a9a9d3e88cd13d",
+    "comm_aware": "93d467a892c24aa94153660912ba6e96224683502eb6ccfd4730560bf196cdd7",
+    "comm_aware_oma": "1378beb50df2c787370508b6b1dbc3febc206679723024949fa80d7e5cad0c95",
 }
 EXPECTED_TRAINING = "7c37ea92de25bdf58d29e99de97f21be5e76b720ff59b7d31b6a21ab6a5bb8eb"
 
@@ -73,6 +83,46 @@ def rollout_digest(env_id: str, kwargs: dict, n_steps: int = 400, seed: int = 3)
             obs, _ = env.reset()
             _update(digest, obs)
     env.close()
+    return digest.hexdigest()
+
+
+def map_digest(scenario: str) -> str:
+    """Hash of a scenario's radio map: the outage map, the SINR map to 1e-9 dB and the planners' channel maps."""
+    env = gym.make("NomaRadioMap-v0", scenario=scenario).unwrapped
+    radio_map = env.radio_map
+    digest = hashlib.sha256()
+    _update(digest, radio_map.outage_map())
+    _update(digest, np.round(radio_map.sinr_map_db, 9))
+    for array in channel_maps(env):
+        _update(digest, array)
+    return digest.hexdigest()
+
+
+PLANNERS = {
+    "shortest": ("NomaRadioMap-v0", ShortestPathPlanner),
+    "comm_aware": ("NomaRadioMapReality-v0", CommAwarePlanner),
+    "comm_aware_oma": ("NomaRadioMapOMA-v0", CommAwarePlanner),
+}
+
+
+def planner_digest(name: str, n_episodes: int = 3, seed: int = 5) -> str:
+    """Hash of the actions, rewards and end-of-episode figures of a planner's seeded episodes on ``small``."""
+    env_id, planner_class = PLANNERS[name]
+    env = gym.make(env_id, scenario="small")
+    planner = planner_class()
+    digest = hashlib.sha256()
+    for episode in range(n_episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        planner.reset(env.unwrapped)
+        done = False
+        while not done:
+            action = planner.act(env.unwrapped, obs)
+            obs, reward, terminated, truncated, info = env.step(action)
+            for value in (action, obs, reward):
+                _update(digest, value)
+            done = terminated or truncated
+        for key in SUMMARY_KEYS:
+            _update(digest, info[key])
     return digest.hexdigest()
 
 
@@ -115,12 +165,28 @@ def test_rollout_fingerprint(name: str) -> None:
     assert rollout_digest(env_id, kwargs) == EXPECTED_ROLLOUTS[name]
 
 
+@pytest.mark.parametrize("scenario", sorted(EXPECTED_MAPS))
+def test_radio_map_fingerprint(scenario: str) -> None:
+    assert map_digest(scenario) == EXPECTED_MAPS[scenario]
+
+
+@pytest.mark.parametrize("name", sorted(PLANNERS))
+def test_planner_fingerprint(name: str) -> None:
+    assert planner_digest(name) == EXPECTED_PLANNERS[name]
+
+
 @pytest.mark.slow
 def test_training_fingerprint() -> None:
     assert training_digest() == EXPECTED_TRAINING
 
 
 if __name__ == "__main__":
+    import sys
+
+    if "--no-training" in sys.argv:
+        training_digest = lambda: "(skipped)"  # noqa: E731
     for name, (env_id, kwargs) in ROLLOUTS.items():
         print(f'    "{name}": "{rollout_digest(env_id, kwargs)}",')
+    print({scenario: map_digest(scenario) for scenario in EXPECTED_MAPS})
+    print({name: planner_digest(name) for name in PLANNERS})
     print(f'EXPECTED_TRAINING = "{training_digest()}"')
