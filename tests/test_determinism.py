@@ -10,12 +10,9 @@ import hashlib
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch as th
 
 import noma_radiomap  # noqa: F401  (registers the ids)
 from noma_radiomap.planners import CommAwarePlanner, ShortestPathPlanner, channel_maps
-from sb3_dtdpg import DTDPG
-from sb3_dtdpg.common.phases import Phase
 
 INFO_KEYS = ("rate_bps", "sinr_db", "outage", "power_w", "gain_db", "decoding_order")
 SUMMARY_KEYS = ("is_success", "mqi", "mission_time", "outage_steps")
@@ -128,6 +125,11 @@ def planner_digest(name: str, n_episodes: int = 3, seed: int = 5) -> str:
 
 def training_digest() -> str:
     """Hash of the parameters after a short seeded DT-DPG training through both phases (transfer included)."""
+    import torch as th
+
+    from sb3_dtdpg import DTDPG
+    from sb3_dtdpg.common.phases import Phase
+
     th.set_num_threads(1)
     env = gym.make("NomaRadioMap-v0", scenario="small")
     phases = [
