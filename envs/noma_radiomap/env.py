@@ -126,9 +126,11 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Episode End
 
-    Terminates when every robot has arrived (within ``arrival_radius`` of its destination). Truncates after
-    the scenario's ``mission.max_steps`` steps (the registered ids also apply a ``TimeLimit`` of 300, the
-    ``mall`` value; pass ``max_episode_steps=`` to ``gymnasium.make`` for scenarios with longer missions).
+    Terminates when every robot has arrived (within ``arrival_radius`` of its destination). Truncation is left
+    to Gymnasium's ``TimeLimit``: the registered ids wrap the env in one of the scenario's ``mission.max_steps``
+    steps (:func:`noma_radiomap.registration.make_env`), so ``spec.max_episode_steps`` follows the scenario. The
+    end-of-mission figures (``mqi``, ...) come in the ``info`` of the step that terminates or reaches
+    ``max_steps``.
 
     ## Arguments
 
@@ -242,7 +244,12 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def _setup_rewards(self, reward_phase: str) -> None:
         mission = self.scenario.mission
-        self._reward_constants = rewards.RewardConstants(outage_penalty=mission.outage_penalty)
+        self._reward_constants = rewards.RewardConstants(
+            time_cost=mission.time_cost,
+            outage_penalty=mission.outage_penalty,
+            arrival_reward=mission.arrival_reward,
+            success_reward=mission.success_reward,
+        )
         self._d_max = self.scenario.room.d_max
         self.set_reward_phase(reward_phase)
 
@@ -315,11 +322,11 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         terminated = self._is_terminated()
         self._outage_steps += outage
         self._arrival_step[arriving] = self.step_count
-        truncated = not terminated and self.step_count >= self.max_steps
-        info = self._info(components, power, result, outage, end=terminated or truncated)
+        info = self._info(components, power, result, outage, end=terminated or self.step_count >= self.max_steps)
         if self.render_mode == "human":
             self.render()
-        return self._get_obs(), reward, terminated, truncated, info
+        # Truncation is the TimeLimit's (registration.make_env), at the scenario's mission.max_steps.
+        return self._get_obs(), reward, terminated, False, info
 
     # --- the stages of a step --------------------------------------------------------------------
     def _move(self, motion: np.ndarray, active: np.ndarray) -> np.ndarray:

@@ -24,6 +24,7 @@ import numpy as np
 import yaml
 
 from noma_radiomap import geometry
+from noma_radiomap.rewards import RewardConstants
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -182,12 +183,19 @@ class RobotMission:
 
 @dataclass(frozen=True)
 class Mission:
-    """Mission constants: MQI budget ``t_total``, outage penalty ``lambda``, step limit and step length (s)."""
+    """
+    Mission constants: MQI budget ``t_total``, outage penalty ``lambda``, step limit and step length (s), and the
+    reward constants (defaults: the paper's, Sec. IV-E): time cost ``R_c``, arrival reward ``R_d`` and success
+    reward ``R_s``.
+    """
 
     t_total: float
     outage_penalty: float
     max_steps: int
     time_step: float
+    time_cost: float = RewardConstants.time_cost
+    arrival_reward: float = RewardConstants.arrival_reward
+    success_reward: float = RewardConstants.success_reward
 
 
 @dataclass(frozen=True)
@@ -404,12 +412,15 @@ def _parse_simple(cls: type, data: Any, path: str, positive: tuple[str, ...], no
 
 
 def _parse_mission(data: Any) -> Mission:
-    d = _mapping(data, "mission", ("t_total", "outage_penalty", "max_steps", "time_step"))
+    reward_keys = ("time_cost", "arrival_reward", "success_reward")
+    d = _mapping(data, "mission", ("t_total", "outage_penalty", "max_steps", "time_step"), reward_keys)
+    defaults = {name: Mission.__dataclass_fields__[name].default for name in reward_keys}
     return Mission(
         t_total=_number(d["t_total"], "mission.t_total", positive=True),
         outage_penalty=_number(d["outage_penalty"], "mission.outage_penalty", nonnegative=True),
         max_steps=_integer(d["max_steps"], "mission.max_steps", positive=True),
         time_step=_number(d["time_step"], "mission.time_step", positive=True),
+        **{name: _number(d.get(name, defaults[name]), f"mission.{name}") for name in reward_keys},
     )
 
 
