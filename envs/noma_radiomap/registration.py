@@ -40,6 +40,10 @@ def make_env(**kwargs: Any) -> gym.Env:
     return TimeLimit(env, max_episode_steps=env.max_steps)
 
 
+# gymnasium.make reads the creator's render modes from here, as it does from an env class
+make_env.metadata = NomaRadioMapEnv.metadata  # type: ignore[attr-defined]
+
+
 def register_envs() -> None:
     """Register every id of :data:`ENV_IDS` (``mall`` scenario, ``"destination"`` reward phase) once."""
     for env_id, kwargs in ENV_IDS.items():
