@@ -145,11 +145,11 @@ def point_cell(xy: np.ndarray, resolution: float, shape: tuple[int, int]) -> tup
     :param shape: grid shape ``(nx, ny)``
     :return: ``(ix, iy)`` int arrays of shape (...)
     """
-    xy = np.asarray(xy, dtype=np.float64)
-    # np.minimum / np.maximum rather than np.clip: the env calls this every step on a few points.
-    ix = np.minimum(np.maximum(np.floor(xy[..., 0] / resolution), 0), shape[0] - 1).astype(np.int64)
-    iy = np.minimum(np.maximum(np.floor(xy[..., 1] / resolution), 0), shape[1] - 1).astype(np.int64)
-    return ix, iy
+    # Both axes in one pass, np.minimum / np.maximum rather than np.clip: the env calls this every step on a
+    # few points, where the number of numpy calls is the cost.
+    cells = np.minimum(np.maximum(np.floor(np.asarray(xy, dtype=np.float64) / resolution), 0.0), (shape[0] - 1, shape[1] - 1))
+    cells = cells.astype(np.int64)
+    return cells[..., 0], cells[..., 1]
 
 
 def distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
