@@ -12,7 +12,7 @@ cluster band ``W = U B`` (the interferers spread their power evenly over ``W``),
 power spectral density and ``p_u`` the transmit power the AP allocates to robot u.
 """
 
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -79,6 +79,22 @@ def decoding_order(equivalent_gains: np.ndarray) -> np.ndarray:
     return np.argsort(equivalent_gains, axis=-1, kind="stable")
 
 
+def sic_sinr(power_w: Any, gain: Any, stronger_power_w: Any, interference_w: Any, noise_w: Any) -> Any:
+    """
+    NOMA SINR after SIC given the power of the robots stronger than u (paper Eq. (11)):
+    ``p_u g_u / (g_u P_stronger + I_u + N0 W)``. Operators only, so it takes arrays or Python floats alike.
+    """
+    return power_w * gain / (gain * stronger_power_w + interference_w + noise_w)
+
+
+def fdma_sinr(power_w: Any, gain: Any, interference_w: Any, n_robots: int, noise_w_per_robot: Any) -> Any:
+    """
+    OMA (FDMA) SINR, ``p_u g_u / (I_u / U + N0 B)`` (see :func:`oma_sinr`). Operators only, so it takes arrays
+    or Python floats alike.
+    """
+    return power_w * gain / (interference_w / n_robots + noise_w_per_robot)
+
+
 def noma_sinr(
     power_w: np.ndarray,
     gain: np.ndarray,
@@ -115,8 +131,7 @@ def noma_sinr(
         stronger[from_strongest_order] = stronger_sorted
     else:
         np.put_along_axis(stronger, from_strongest_order, stronger_sorted, axis=-1)
-    sinr = power_w * gain / (gain * stronger + interference_w + noise_w)
-    return sinr, order
+    return sic_sinr(power_w, gain, stronger, interference_w, noise_w), order
 
 
 def oma_sinr(
@@ -136,8 +151,7 @@ def oma_sinr(
     :param noise_w_per_robot: noise power over one robot's band, ``N0 B`` in watts
     :return: linear SINRs, shape (..., U)
     """
-    n_robots = np.shape(power_w)[-1]
-    return power_w * gain / (interference_w / n_robots + noise_w_per_robot)
+    return fdma_sinr(power_w, gain, interference_w, np.shape(power_w)[-1], noise_w_per_robot)
 
 
 def shannon_rate(sinr: np.ndarray, bandwidth_hz: float) -> np.ndarray:
@@ -192,6 +206,64 @@ def downlink(
     else:
         raise ValueError(f"multiple_access must be one of {MULTIPLE_ACCESS}, got {multiple_access!r}")
     return DownlinkResult(rate_bps=rate, sinr_db=sinr_to_db(sinr), decoding_order=order)
+
+
+def single_transmission(
+    power_actions: list[float],
+    gain: list[float],
+    interference_w: list[float],
+    max_power_w: float,
+    bandwidth_per_robot_hz: float,
+    noise_w_per_hz: float,
+    multiple_access: MultipleAccess = "noma",
+) -> tuple[np.ndarray, DownlinkResult]:
+    """
+    :func:`allocate_power` then :func:`downlink` for one mission, on Python floats: the env's per-step fast
+    path (numpy calls on arrays of U = 2 elements cost more than the arithmetic; ``benchmarks/env_speed.py``).
+
+    The SINRs come from the same :func:`sic_sinr` / :func:`fdma_sinr`, the rates and dB values from
+    :func:`shannon_rate` and :func:`sinr_to_db`; only the loops over the robots are written out. The tests
+    check that it gives the same bits as the batched functions.
+
+    :param power_actions: power actions ``a_u`` (U floats), clipped to [-1, 1]
+    :param gain: linear channel gains ``g_u`` (U floats)
+    :param interference_w: interference powers ``I_u`` over the cluster band in watts (U floats)
+    :param max_power_w: ``P_max`` in watts
+    :param bandwidth_per_robot_hz: ``B`` in Hz
+    :param noise_w_per_hz: ``N0`` in W/Hz
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :return: the allocated powers (U,) and the :class:`DownlinkResult`
+    """
+    n_robots = len(power_actions)
+    # allocate_power() on floats: Python's sum adds left to right, like sequential_sum
+    power = [(0.5 * max_power_w) * (min(max(a, -1.0), 1.0) + 1.0) for a in power_actions]
+    total = sum(power)
+    if total > max_power_w:
+        power = [p * (max_power_w / total) for p in power]
+    cluster_band_hz = n_robots * bandwidth_per_robot_hz
+    cluster_noise_w = noise_w_per_hz * cluster_band_hz
+    equivalent = [equivalent_gain(g, i, cluster_noise_w) for g, i in zip(gain, interference_w, strict=True)]
+    order = sorted(range(n_robots), key=equivalent.__getitem__)  # stable, like decoding_order()
+    sinr = [0.0] * n_robots
+    if multiple_access == "noma":
+        stronger = 0.0
+        for u in reversed(order):  # from the strongest down, like noma_sinr's cumulative sum
+            sinr[u] = sic_sinr(power[u], gain[u], stronger, interference_w[u], cluster_noise_w)
+            stronger += power[u]
+        band_hz = cluster_band_hz
+    elif multiple_access == "oma":
+        noise_w = noise_w_per_hz * bandwidth_per_robot_hz
+        sinr = [fdma_sinr(p, g, i, n_robots, noise_w) for p, g, i in zip(power, gain, interference_w, strict=True)]
+        band_hz = bandwidth_per_robot_hz
+    else:
+        raise ValueError(f"multiple_access must be one of {MULTIPLE_ACCESS}, got {multiple_access!r}")
+    sinr_array = np.array(sinr)
+    result = DownlinkResult(
+        rate_bps=shannon_rate(sinr_array, band_hz),
+        sinr_db=sinr_to_db(sinr_array),
+        decoding_order=np.array(order, dtype=np.int64),
+    )
+    return np.array(power), result
 
 
 def in_outage(rate_bps: np.ndarray, qos_rate_bps: float) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 from gymnasium import spaces
 
 from noma_radiomap import geometry, rewards
-from noma_radiomap.downlink import MULTIPLE_ACCESS, DownlinkResult, allocate_power, downlink, in_outage
+from noma_radiomap.downlink import MULTIPLE_ACCESS, DownlinkResult, in_outage, single_transmission
 from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import (
     dbm_to_watt,
@@ -352,8 +352,16 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     ) -> tuple[np.ndarray, DownlinkResult, np.ndarray]:
         """Downlink: the allocated powers (arrived robots get none), rates and SINRs, and the outage of the active robots."""
         radio = self.scenario.radio
-        power = allocate_power(np.where(active, power_actions, -1.0), self._max_power_w)
-        result = downlink(power, gain, interference, radio.bandwidth_per_robot_hz, self._noise_w_per_hz, self.multiple_access)
+        # single_transmission: allocate_power + downlink on Python floats, the same bits (tests/test_downlink.py)
+        power, result = single_transmission(
+            np.where(active, power_actions, -1.0).tolist(),
+            gain.tolist(),
+            interference.tolist(),
+            self._max_power_w,
+            radio.bandwidth_per_robot_hz,
+            self._noise_w_per_hz,
+            self.multiple_access,
+        )
         return power, result, in_outage(result.rate_bps, radio.qos_rate_bps) & active
 
     def _distances(self) -> np.ndarray:

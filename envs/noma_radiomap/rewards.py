@@ -97,7 +97,7 @@ def reward_components(
     n_active, n_arriving = active.sum(axis=-1), arriving.sum(axis=-1)
     n_outage = (outage & active).sum(axis=-1)
     # Everyone has arrived: the active robots of this step are exactly the arriving ones.
-    all_arrived = np.all(arriving | ~active, axis=-1)
+    all_arrived = (arriving | ~active).all(axis=-1)
     return {
         "time": constants.time_cost * n_active + 0.0,  # + 0.0: no -0.0 when every robot has arrived
         "inducing": sequential_sum(np.where(active, inducing_reward(distance, d_max), 0.0)),
