@@ -4,7 +4,7 @@ Both go through ``gymnasium.make`` (same wrappers: PassiveEnvChecker, OrderEnfor
 random actions from ``action_space.sample()``; episodes are reset when they end. Time is this process's
 CPU time, rounds alternate between the envs and each env's best round is kept (like ``timeit``): both make
 the ratios robust to other load on a shared machine.
-Bars (issue 3): >= 0.3x Pendulum-v1 in ``radio_map`` mode, >= 0.25x in ``rayleigh`` mode.
+Bars: >= 0.3x Pendulum-v1 in ``radio_map`` mode, >= 0.25x in ``rayleigh`` mode.
 
 Also prints the radio-map build figures of ``benchmarks/radiomap_build.py`` when that script exists.
 

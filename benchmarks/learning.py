@@ -1,4 +1,4 @@
-"""DT-DPG learning benchmark on NomaRadioMap-v0 (issue 4, item 8).
+"""DT-DPG learning benchmark on NomaRadioMap-v0.
 
 1. Phase 1 ("destination"): DT-DPG with its defaults trains until the robots reach their destinations in >= 95 % of
    the last 20 episodes (the curriculum's early-transfer rule) or until the phase's episode budget (500) is spent.
@@ -29,7 +29,7 @@ HANDLINGS = ("keep", "clear", "relabel")
 
 
 def _phases(phase1_episodes: int, phase2_episodes: int, handling: str) -> list[Any]:
-    from sb3_dtdpg.common.phases import default_phases
+    from sb3_dtdpg.missions import default_phases
 
     destination, mqi = default_phases(destination_episodes=phase1_episodes, replay_handling=handling)
     # A phase-2 budget, so that each branch stops by itself (the curriculum stops after its last budget)

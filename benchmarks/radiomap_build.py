@@ -1,4 +1,4 @@
-"""Radio-map build time and memory (issue 3): ``mall`` at 0.5 m and at 0.1 m resolution.
+"""Radio-map build time and memory: ``mall`` at 0.5 m and at 0.1 m resolution.
 
 Bars: ``mall`` builds in <= 0.25 s; ``mall`` at 0.1 m (550 x 300 cells) in <= 10 s and <= 2 GiB
 peak memory. Every build is fresh (``RadioMap(scenario)``, not the cache). The 0.1 m build runs

@@ -1,4 +1,4 @@
-"""The algorithm set compared on the mission environments (SPEC 4).
+"""The algorithm set compared on the mission environments (the paper's Sec. V; docs/RESULTS.md).
 
 ``make_env`` and ``make_model`` build every algorithm the same way, so that a comparison differs only
 in the algorithm:
@@ -37,8 +37,8 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
 import noma_radiomap  # noqa: F401  (registers the env ids)
-from sb3_dtdpg.common.phases import default_phases
 from sb3_dtdpg.dtdpg.dtdpg import DTDPG
+from sb3_dtdpg.missions import default_phases
 
 __all__ = [
     "ALGORITHMS",
@@ -212,6 +212,6 @@ def mission_callbacks(model: BaseAlgorithm) -> list[BaseCallback]:
     :param model: a model built by :func:`make_model`
     :return: the callbacks
     """
-    from sb3_dtdpg.common.callbacks import MissionLoggerCallback
+    from sb3_dtdpg.missions import MissionLoggerCallback
 
     return [] if isinstance(model, DTDPG) else [MissionLoggerCallback()]

@@ -6,7 +6,7 @@ Subcommands:
 - ``train``: one training run with TensorBoard logging, then its test evaluation;
 - ``compare``: the main job: DT-DPG vs DDPG in NOMA and OMA, several seeds in parallel, the results
   table (printed, Markdown, CSV) with the planners as references, learning curves and trajectories;
-- ``reproduce``: every experiment of the paper (SPEC section 5), resumable.
+- ``reproduce``: every experiment of the paper (the paper's Section V), resumable.
 """
 
 from __future__ import annotations
@@ -189,7 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_cmd_compare)
 
-    p = commands.add_parser("reproduce", help="every experiment of the paper (SPEC 5); finished runs are not re-run")
+    p = commands.add_parser(
+        "reproduce", help="every experiment of the paper (the paper's Sec. V); finished runs are not re-run"
+    )
     p.add_argument("--budget", type=_budget, default="paper", help=f"one of {', '.join(_PUBLIC_BUDGETS)} (default: paper)")
     p.add_argument("--seeds", type=_positive, default=None, help="seeds per configuration (default: the budget's)")
     p.add_argument("--out", default="results/reproduce", help="output folder (default: results/reproduce)")

@@ -20,8 +20,9 @@ import rl_zoo3.exp_manager
 from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
 
 import noma_radiomap  # noqa: F401  (registers the NomaRadioMap env ids)
-from sb3_dtdpg.common.phases import REPLAY_HANDLINGS, default_phases
+from sb3_dtdpg.common.phases import REPLAY_HANDLINGS
 from sb3_dtdpg.dtdpg import DTDPG
+from sb3_dtdpg.missions import default_phases
 
 ALGO_NAME = "dtdpg"
 
@@ -78,7 +79,7 @@ def convert_dtdpg_params(sampled_params: dict[str, Any]) -> dict[str, Any]:
     Turn a DT-DPG trial's raw parameters into ``DTDPG`` keyword arguments
     (the counterpart of the zoo's ``convert_offpolicy_params``).
 
-    The phases are the paper's two (:func:`sb3_dtdpg.common.phases.default_phases`) with the sampled
+    The phases are the paper's two (:func:`sb3_dtdpg.missions.default_phases`) with the sampled
     budget, threshold, noise scales and replay handling, as plain dicts so that the zoo's saved
     ``config.yml`` stays readable YAML.
 

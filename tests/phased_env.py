@@ -1,6 +1,6 @@
 """A tiny, fast env with reward phases for the curriculum tests.
 
-It mirrors the interface of ``noma_radiomap.NomaRadioMapEnv`` (SPEC 2.8-2.9, docs/ARCHITECTURE.md):
+It mirrors the interface of ``noma_radiomap.NomaRadioMapEnv`` (docs/ARCHITECTURE.md):
 ``REWARD_PHASES``, ``reward_phase``, ``set_reward_phase``, ``reward_weights(phase=None)``,
 ``info["reward_components"]`` at every step and ``is_success``, ``mqi``, ``mission_time``,
 ``outage_steps`` at episode end, with a toy physics: point robots in the unit square, no obstacles,

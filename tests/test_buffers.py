@@ -6,13 +6,16 @@ from stable_baselines3 import DDPG
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
-from sb3_dtdpg.common.buffers import REWARD_COMPONENTS, RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
+from sb3_dtdpg.common.buffers import RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
+
+REWARD_COMPONENTS = ("time", "inducing", "qos", "arrival", "success")
 
 OBS_SPACE = spaces.Box(-1, 1, (2,), np.float32)
 ACT_SPACE = spaces.Box(-1, 1, (1,), np.float32)
 
 
 def make_buffer(size=8, n_envs=2, **kwargs):
+    kwargs.setdefault("component_keys", REWARD_COMPONENTS)
     return RewardComponentsReplayBuffer(size, OBS_SPACE, ACT_SPACE, device="cpu", n_envs=n_envs, **kwargs)
 
 
@@ -162,3 +165,16 @@ def test_with_ddpg_on_phased_env():
     # The env's reward is the weighted sum of its components
     w = np.array([PHASE_WEIGHTS["destination"][k] for k in REWARD_COMPONENTS])
     np.testing.assert_allclose(buffer.rewards[:15], buffer.reward_components[:15] @ w, rtol=1e-6)
+
+
+def test_component_keys_default_to_the_first_info():
+    buffer = RewardComponentsReplayBuffer(8, OBS_SPACE, ACT_SPACE, device="cpu")
+    assert buffer.component_keys is None
+    buffer.relabel({"a": 1.0})  # nothing stored yet: a no-op
+    info = {"reward_components": {"b": 2.0, "a": 1.0}}
+    obs = np.zeros((1, *OBS_SPACE.shape), dtype=np.float32)
+    action = np.zeros((1, *ACT_SPACE.shape), dtype=np.float32)
+    buffer.add(obs, obs, action, np.zeros(1), np.zeros(1), [info])
+    assert buffer.component_keys == ("b", "a")
+    buffer.relabel({"a": 3.0})
+    assert buffer.rewards[0, 0] == pytest.approx(3.0)

@@ -1,4 +1,4 @@
-"""NOMA / OMA downlink (SPEC 2.6): hand-computed values and properties against a loop re-computation."""
+"""NOMA / OMA downlink (paper Eq. (8)-(13)): hand-computed values and properties against a loop re-computation."""
 
 import math
 
@@ -105,7 +105,7 @@ def test_batched_equals_unbatched():
 
 
 def _reference(power, gain, interference, mode):
-    """Straightforward loop re-computation of SPEC 2.6."""
+    """Straightforward loop re-computation of the paper's Eq. (10)-(12) (docs/MODEL.md)."""
     n = len(power)
     rates, sinrs = [], []
     for u in range(n):
@@ -168,16 +168,51 @@ def test_strongest_robot_decodes_without_intra_cluster_interference(actions):
     assert result.rate_bps[strongest] == pytest.approx(len(power) * B * math.log2(1 + expected))
 
 
+@settings(max_examples=100, deadline=None)
+@given(placements, st.sampled_from(["noma", "oma"]))
+def test_batch_gives_the_same_bits_as_one_mission(placement, mode):
+    # A vector env steps N missions through the same functions: each row must equal that mission alone.
+    actions, log_gain, log_interference = placement
+    gain, interference = 10**log_gain, 10**log_interference
+    batch_actions = np.stack([actions, actions[::-1], -actions])
+    batch_gain = np.stack([gain, gain[::-1], gain * 3.0])
+    batch_interference = np.stack([interference, interference[::-1], interference])
+    batch_power = allocate_power(batch_actions, P_MAX)
+    batch = downlink(batch_power, batch_gain, batch_interference, B, N0, mode)
+    for k in range(3):
+        power = allocate_power(batch_actions[k], P_MAX)
+        one = downlink(power, batch_gain[k], batch_interference[k], B, N0, mode)
+        np.testing.assert_array_equal(batch_power[k], power)
+        np.testing.assert_array_equal(batch.rate_bps[k], one.rate_bps)
+        np.testing.assert_array_equal(batch.sinr_db[k], one.sinr_db)
+        np.testing.assert_array_equal(batch.decoding_order[k], one.decoding_order)
+
+
 @settings(max_examples=200, deadline=None)
 @given(placements, st.sampled_from(["noma", "oma"]))
-def test_single_transmission_equals_vectorised(placement, mode):
-    # The env's per-step float path must be the same model as the vectorised functions.
+def test_single_transmission_gives_the_bits_of_the_batched_functions(placement, mode):
+    # The env's per-step float path is the batched model with the loops written out: the same bits.
     actions, log_gain, log_interference = placement
     gain, interference = 10**log_gain, 10**log_interference
     power, result = single_transmission(actions.tolist(), gain.tolist(), interference.tolist(), P_MAX, B, N0, mode)
     expected_power = allocate_power(actions, P_MAX)
     expected = downlink(expected_power, gain, interference, B, N0, mode)
-    np.testing.assert_allclose(power, expected_power, rtol=1e-12)
-    np.testing.assert_allclose(result.rate_bps, expected.rate_bps, rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(result.sinr_db, expected.sinr_db, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(power, expected_power)
+    np.testing.assert_array_equal(result.rate_bps, expected.rate_bps)
+    np.testing.assert_array_equal(result.sinr_db, expected.sinr_db)
     np.testing.assert_array_equal(result.decoding_order, expected.decoding_order)
+
+
+def test_noma_intra_cluster_power_sums_down_the_decoding_order():
+    # Three robots, decoding order 1 (weakest), 0, 2 (strongest): robot 1 sees p0 + p2, robot 0 sees p2.
+    power = np.array([0.02, 0.03, 0.05])
+    gain = np.array([2e-8, 1e-8, 4e-8])
+    result = downlink(power, gain, np.zeros(3), B, N0, "noma")
+    np.testing.assert_array_equal(result.decoding_order, [1, 0, 2])
+    noise = N0 * 3 * B
+    expected = [
+        0.02 * 2e-8 / (2e-8 * 0.05 + noise),
+        0.03 * 1e-8 / (1e-8 * (0.05 + 0.02) + noise),
+        0.05 * 4e-8 / noise,
+    ]
+    np.testing.assert_allclose(result.rate_bps, 3 * B * np.log2(1 + np.array(expected)), rtol=1e-12)

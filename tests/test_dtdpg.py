@@ -254,3 +254,17 @@ def test_default_phases_relabel_when_the_env_gives_reward_weights():
     model.phases[0] = dataclasses.replace(model.phases[0], n_episodes=2)
     model.learn(60)  # the transfer (after 2 episodes of 20 steps) happens without reward weights
     assert model.curriculum_state["phase_index"] == 1
+
+
+def test_reinitialize_draws_new_networks_and_keeps_the_rest():
+    model = DTDPG("MlpPolicy", _pendulum(), learning_starts=10, batch_size=16, policy_kwargs={"net_arch": [16]}, seed=0)
+    model.learn(30)
+    buffer, noise = model.replay_buffer, model.action_noise
+    before = {k: v.clone() for k, v in model.policy.state_dict().items()}
+    model.reinitialize()
+    assert model.replay_buffer is buffer and model.action_noise is noise and model.seed == 0
+    assert model.actor is model.policy.actor and model.critic_target is model.policy.critic_target
+    after = model.policy.state_dict()
+    weights = [k for k in before if k.endswith("weight")]
+    assert sum(not th.equal(before[k], after[k]) for k in weights) >= len(weights) // 2
+    assert not model.policy.training  # SB3 collects rollouts in eval mode

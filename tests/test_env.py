@@ -1,4 +1,4 @@
-"""NomaRadioMapEnv (SPEC 2.7-2.10): API checkers, determinism, rewards and phases, MQI, options, vec envs."""
+"""NomaRadioMapEnv (docs/MODEL.md): API checkers, determinism, rewards and phases, MQI, options, vec envs."""
 
 import math
 import pickle
@@ -16,7 +16,9 @@ import noma_radiomap
 from noma_radiomap import NomaRadioMapEnv, RadioMap, Scenario, load_scenario
 from noma_radiomap.downlink import allocate_power, downlink
 from noma_radiomap.propagation import EXPECTED_FADING_DB, db_to_linear, dbm_to_watt
-from noma_radiomap.registration import ENV_IDS, MAX_EPISODE_STEPS, register_envs
+from noma_radiomap.registration import ENV_IDS, register_envs
+
+MALL_STEPS = load_scenario("mall").mission.max_steps
 
 MODES = [(ma, ch) for ma in ("noma", "oma") for ch in ("radio_map", "rayleigh")]
 # Two free, mutually reachable points per robot in the `small` scenario (left of its wall, no obstacle on the
@@ -71,7 +73,7 @@ def test_checkers_registered_ids(env_id):
     env = gym.make(env_id)
     gym_check_env(env.unwrapped)
     sb3_check_env(env, warn=True)
-    assert env.spec.max_episode_steps == MAX_EPISODE_STEPS
+    assert env.spec.max_episode_steps == MALL_STEPS
 
 
 @pytest.mark.filterwarnings("error")
@@ -87,7 +89,8 @@ def test_registration_is_idempotent_and_kwargs_pass_through():
         warnings.simplefilter("error")
         register_envs()
         register_envs()
-    assert MAX_EPISODE_STEPS == load_scenario("mall").mission.max_steps
+    # The TimeLimit follows the scenario's mission.max_steps
+    assert gym.make("NomaRadioMap-v0", scenario="small").spec.max_episode_steps == load_scenario("small").mission.max_steps
     env = gym.make("NomaRadioMapOMAReality-v0", scenario="small", reward_phase="mqi", inducing="geodesic").unwrapped
     assert (env.scenario.name, env.multiple_access, env.channel, env.reward_phase, env.inducing) == (
         "small",
@@ -362,13 +365,14 @@ def test_arrived_robot_stops_gets_no_power_and_no_cost():
 
 
 def test_truncation_and_mqi_when_nobody_arrives():
-    env = small_env()
-    env.reset(seed=0, options=STRAIGHT)
+    wrapped = gym.make("NomaRadioMap-v0", scenario="small")
+    env = wrapped.unwrapped
+    wrapped.reset(seed=0, options=STRAIGHT)
     hold = np.zeros(env.action_space.shape, dtype=np.float32)
     hold[2::3] = -1.0  # no power at all: every robot is in outage every step
     max_steps = env.scenario.mission.max_steps
     for k in range(1, max_steps + 1):
-        _, _, terminated, truncated, info = env.step(hold)
+        _, _, terminated, truncated, info = wrapped.step(hold)
         assert not terminated
         assert truncated == (k == max_steps)
     assert info["is_success"] is False
@@ -382,7 +386,7 @@ def test_time_limit_of_registered_id_ends_episode_with_summary():
     env = gym.make("NomaRadioMap-v0")
     env.reset(seed=0)
     hold = np.zeros(env.action_space.shape, dtype=np.float32)
-    for _ in range(MAX_EPISODE_STEPS):
+    for _ in range(MALL_STEPS):
         _, _, terminated, truncated, info = env.step(hold)
     assert truncated and not terminated
     assert "mqi" in info and info["is_success"] is False

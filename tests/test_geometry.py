@@ -1,4 +1,4 @@
-"""Grid snapping, occupancy, occlusion (slab test, distinct obstacles) and grid paths (SPEC 2.2)."""
+"""Grid snapping, occupancy, occlusion (slab test, distinct obstacles) and grid paths (paper Sec. III-B, III-C)."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Robot motion (SPEC 2.7): clipping, sub-steps, wall sliding, arrival; property tests on random grids."""
+"""Robot motion (paper Sec. IV-D): clipping, sub-steps, wall sliding, arrival; property tests on random grids."""
 
 import numpy as np
 import pytest
@@ -7,13 +7,14 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from noma_radiomap.motion import GridMotion, clip_displacements
+from noma_radiomap.scenario import Room
 
 RES = 0.5
 
 
 def _motion(blocked, max_step=1.0, arrival_radius=0.0):
     nx, ny = blocked.shape
-    return GridMotion(blocked, RES, nx * RES, ny * RES, max_step, arrival_radius)
+    return GridMotion(blocked, Room(nx * RES, ny * RES, RES), max_step, arrival_radius)
 
 
 def _cells(positions):

@@ -4,7 +4,8 @@ import pickle
 import pytest
 import yaml
 
-from sb3_dtdpg.common.phases import Phase, default_phases, parse_phases, single_phase
+from sb3_dtdpg.common.phases import Phase, parse_phases, single_phase
+from sb3_dtdpg.missions import default_phases
 
 
 def test_defaults_and_reward_phase():

@@ -1,4 +1,4 @@
-"""Path loss (SPEC 2.3), the expected fading constant (SPEC 2.4), power units and noise."""
+"""Path loss (paper Eq. (1)-(3)), the channel gain with fading (Eq. (4), (17)), power units and noise."""
 
 import math
 
@@ -10,9 +10,14 @@ from hypothesis import strategies as st
 from noma_radiomap.propagation import (
     EXPECTED_FADING_DB,
     dbm_to_watt,
+    expected_channel_gain,
+    faded_gain,
+    interference_power,
+    linear_to_db,
     noise_power_dbm,
-    noise_power_w,
+    path_gain,
     path_loss_db,
+    sequential_sum,
     watt_to_dbm,
 )
 
@@ -49,7 +54,7 @@ def test_nlos_at_20m_with_custom_constants():
 
 
 def test_distance_clipped_to_one_metre():
-    # Below 1 m the model is not valid (SPEC 2.3: d >= 1); the loss is that of d = 1 m.
+    # Below 1 m the model is not valid (docs/MODEL.md: d >= 1); the loss is that of d = 1 m.
     assert path_loss_db(0.2, 0) == pytest.approx(-27.2 + FREQ_TERM, abs=1e-3)
     assert path_loss_db(0.0, 2) == pytest.approx(FREQ_TERM - 28 + 15 + 4, abs=1e-3)
 
@@ -104,9 +109,32 @@ def test_dbm_watt_round_trip(power_dbm):
 
 def test_noise_power():
     # N0 = -100 dBm/Hz = 1e-13 W/Hz; over W = 2 x 15 kHz: 3e-9 W = -100 + 10 log10(30000) = -55.2288 dBm.
-    assert noise_power_w(-100.0, 30_000.0) == pytest.approx(1e-13 * 30_000, rel=1e-9)
     assert noise_power_dbm(-100.0, 30_000.0) == pytest.approx(-100.0 + 44.7712, abs=1e-4)
     # OMA: one robot's band B = 15 kHz -> -58.2391 dBm
     assert noise_power_dbm(-100.0, 15_000.0) == pytest.approx(-58.2391, abs=1e-4)
     with pytest.raises(ValueError, match=r"bandwidth_hz: must be > 0, got 0"):
         noise_power_dbm(-100.0, 0.0)
+
+
+def test_channel_gain_by_hand():
+    # 80 dB of path loss: 1e-8 without fading; the expected fading takes 2.5068 dB off.
+    assert path_gain(80.0) == pytest.approx(1e-8, rel=1e-12)
+    assert expected_channel_gain(80.0) == pytest.approx(1e-8 * 10 ** (EXPECTED_FADING_DB / 10), rel=1e-12)
+    assert faded_gain(np.array([1e-8, 2e-8]), np.array([0.5, 2.0])).tolist() == [5e-9, 4e-8]
+
+
+def test_interference_is_the_power_weighted_gain_sum():
+    gains = np.array([[1e-9, 2e-9], [3e-9, 0.0]])  # two receivers, two interferers
+    np.testing.assert_allclose(interference_power(gains, np.array([0.5, 1.0])), [2.5e-9, 1.5e-9], rtol=1e-12)
+    assert interference_power(np.zeros((3, 0)), np.zeros(0)).tolist() == [0.0, 0.0, 0.0]
+
+
+def test_sequential_sum_adds_left_to_right():
+    values = np.array([1.0, 1e16, -1e16])
+    assert sequential_sum(values) == (1.0 + 1e16) - 1e16  # 0.0; a pairwise or reordered sum may give 1.0
+    np.testing.assert_array_equal(sequential_sum(np.stack([values, values[::-1]])), [0.0, (-1e16 + 1e16) + 1.0])
+
+
+def test_linear_to_db_floors_zero():
+    assert linear_to_db(100.0) == pytest.approx(20.0)
+    assert np.isfinite(linear_to_db(0.0)) and linear_to_db(0.0) < -3000

@@ -1,5 +1,5 @@
-"""The radio map (SPEC 2.3, 2.5): shapes and indexing, cache, the SINR formula, and the "communication
-matters" properties of the built-in ``mall`` scenario (SPEC 2.1)."""
+"""The radio map (paper Eq. (16)-(19)): shapes and indexing, cache, the SINR formula, and the "communication
+matters" properties of the built-in ``mall`` scenario (docs/SCENARIOS.md)."""
 
 import math
 
@@ -72,7 +72,7 @@ def test_cache_returns_same_object():
 
 
 def _independent_sinr_db(scenario, radio_map, ix, iy):
-    """SINR at a cell recomputed from SPEC 2.3-2.5 with plain math (powers in mW)."""
+    """SINR at a cell recomputed from the paper's Eq. (1)-(4) and docs/MODEL.md with plain math (powers in mW)."""
     radio = scenario.radio
     x, y = (ix + 0.5) * scenario.room.resolution, (iy + 0.5) * scenario.room.resolution
     rx = (x, y, scenario.robot.antenna_height)
@@ -120,14 +120,14 @@ def test_outage_map_is_the_qos_test(mall):
 
 
 def test_mall_outage_share_in_range(mall):
-    # SPEC 2.1: with the whole AP power to one robot, 15 % to 60 % of free cells fail the QoS.
+    # docs/SCENARIOS.md: with the whole AP power to one robot, 15 % to 60 % of free cells fail the QoS.
     share = mall.outage_share()
     assert 0.15 <= share <= 0.60
     assert share == pytest.approx(mall.outage_map()[~mall.blocked].sum() / (~mall.blocked).sum())
 
 
 def test_mall_shortest_path_crosses_outage_but_a_detour_avoids_it(mall):
-    # SPEC 2.1: for at least one robot (and destination), every shortest path from the start region to
+    # docs/SCENARIOS.md: for at least one robot (and destination), every shortest path from the start region to
     # the destination crosses outage cells, while a path avoiding them exists and is at most 1.5 x as long.
     scenario, res = mall.scenario, mall.resolution
     outage = mall.outage_map()

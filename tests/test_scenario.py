@@ -1,4 +1,4 @@
-"""Scenario files (SPEC 2.1): built-ins, round trips, and validation of every field."""
+"""Scenario files (docs/SCENARIOS.md): built-ins, round trips, and validation of every field."""
 
 import copy
 import math

@@ -169,6 +169,18 @@ def test_plain_ddpg_baseline_is_plain() -> None:
     assert entry["env_kwargs"] == {"reward_phase": "combined"}
 
 
+def test_zoo_ddpg_is_the_compare_ddpg() -> None:
+    # One definition of the paper's DDPG baseline: the zoo file repeats baselines.py's, value for value.
+    from sb3_dtdpg.baselines import DDPG_KWARGS, DDPG_OU_SIGMA, reward_phase
+
+    with open(CONFIGS / "ddpg.yml") as f:
+        entry = yaml.safe_load(f)[ENV_ID]
+    assert entry["noise_std"] == DDPG_OU_SIGMA
+    assert entry["env_kwargs"]["reward_phase"] == reward_phase("ddpg")
+    for key, value in DDPG_KWARGS.items():
+        assert (eval(entry[key]) if key == "policy_kwargs" else entry[key]) == value, key
+
+
 # ----------------------------------------------------------------------------- ExperimentManager fixes
 def test_yaml_env_kwargs_reach_the_eval_env(tmp_path: Path) -> None:
     def eval_kwargs(**kwargs: Any) -> dict[str, Any]:

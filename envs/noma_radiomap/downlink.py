@@ -1,8 +1,10 @@
-"""NOMA and OMA downlink of one AP cluster (SPEC 2.6, paper Sec. II-B).
+"""NOMA and OMA downlink of one AP cluster (paper Sec. II-C, Eq. (8)-(13); docs/MODEL.md).
 
 Pure, vectorised numpy functions on linear quantities (watts, linear power gains), broadcasting over
-any leading batch dimensions: the last axis is the robot axis (length U). They are shared by the
-environment, the planners and the tests.
+any leading batch dimensions: the last axis is the robot axis (length U), so one mission ``(U,)`` and a
+batch of N missions ``(N, U)`` go through the same code. They are shared by the environment, the
+planners and the tests. Sums over robots run in a fixed order (left to right, or down the decoding
+order), so a batch gives the same bits as its missions one by one.
 
 Notation: ``g_u`` is robot u's channel power gain from the AP (path loss and small-scale fading,
 linear), ``I_u`` the interference power it receives from the external interferers over the whole
@@ -10,10 +12,11 @@ cluster band ``W = U B`` (the interferers spread their power evenly over ``W``),
 power spectral density and ``p_u`` the transmit power the AP allocates to robot u.
 """
 
-import math
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
+
+from noma_radiomap.propagation import linear_to_db, sequential_sum
 
 MultipleAccess = Literal["noma", "oma"]
 MULTIPLE_ACCESS: tuple[str, ...] = ("noma", "oma")
@@ -39,9 +42,9 @@ class DownlinkResult(NamedTuple):
 
 def allocate_power(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
     """
-    Map power actions to transmit powers (SPEC 2.6): ``p_u = P_max (a_u + 1) / 2``; if
+    Map power actions to transmit powers (docs/MODEL.md, power mapping): ``p_u = P_max (a_u + 1) / 2``; if
     ``sum_u p_u > P_max``, all powers are scaled down by the same factor so that they sum to ``P_max``
-    (the AP's power constraint, paper eq. (12e)).
+    (the AP's power constraint, paper Eq. (15e)).
 
     :param power_actions: actions ``a_u``, shape (..., U); clipped to [-1, 1]
     :param max_power_w: ``P_max`` in watts
@@ -49,13 +52,13 @@ def allocate_power(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
     """
     # np.minimum/np.maximum rather than np.clip: the env calls this every step on tiny arrays.
     power = (0.5 * max_power_w) * (np.minimum(np.maximum(power_actions, -1.0), 1.0) + 1.0)
-    total = power.sum(axis=-1, keepdims=True)
+    total = sequential_sum(power)[..., None]
     return power * np.minimum(1.0, max_power_w / np.maximum(total, _TINY))
 
 
 def equivalent_gain(gain: np.ndarray, interference_w: np.ndarray, noise_w: float | np.ndarray) -> np.ndarray:
     """
-    Equivalent channel gain ``G_u = g_u / (I_u + N0 W)`` (paper eq. (7)), the SIC ordering criterion.
+    Equivalent channel gain ``G_u = g_u / (I_u + N0 W)`` (paper Eq. (8)), the SIC ordering criterion.
 
     :param gain: linear channel gains ``g_u``, shape (..., U)
     :param interference_w: interference powers ``I_u`` in watts, shape (..., U)
@@ -67,13 +70,29 @@ def equivalent_gain(gain: np.ndarray, interference_w: np.ndarray, noise_w: float
 
 def decoding_order(equivalent_gains: np.ndarray) -> np.ndarray:
     """
-    SIC decoding order (paper eq. (8)-(9)): robot indices sorted from the weakest to the strongest
+    SIC decoding order (paper Eq. (9) and the ordering below it): robot indices sorted from the weakest to the strongest
     equivalent gain. Ties are broken by robot index (a lower index counts as weaker).
 
     :param equivalent_gains: ``G_u``, shape (..., U)
     :return: integer indices, shape (..., U)
     """
     return np.argsort(equivalent_gains, axis=-1, kind="stable")
+
+
+def sic_sinr(power_w: Any, gain: Any, stronger_power_w: Any, interference_w: Any, noise_w: Any) -> Any:
+    """
+    NOMA SINR after SIC given the power of the robots stronger than u (paper Eq. (11)):
+    ``p_u g_u / (g_u P_stronger + I_u + N0 W)``. Operators only, so it takes arrays or Python floats alike.
+    """
+    return power_w * gain / (gain * stronger_power_w + interference_w + noise_w)
+
+
+def fdma_sinr(power_w: Any, gain: Any, interference_w: Any, n_robots: int, noise_w_per_robot: Any) -> Any:
+    """
+    OMA (FDMA) SINR, ``p_u g_u / (I_u / U + N0 B)`` (see :func:`oma_sinr`). Operators only, so it takes arrays
+    or Python floats alike.
+    """
+    return power_w * gain / (interference_w / n_robots + noise_w_per_robot)
 
 
 def noma_sinr(
@@ -83,7 +102,7 @@ def noma_sinr(
     noise_w: float | np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """
-    Downlink NOMA SINR with SIC (SPEC 2.6, paper eq. (10)-(11) with the signal powers squared out).
+    Downlink NOMA SINR with SIC (paper Eq. (10)-(11) with the signal powers squared out).
 
     Robot u cancels the signals of every robot weaker than itself; the signals of stronger robots
     stay as intra-cluster interference:
@@ -97,12 +116,22 @@ def noma_sinr(
     """
     power_w, gain, interference_w = np.asarray(power_w), np.asarray(gain), np.asarray(interference_w)
     order = decoding_order(equivalent_gain(gain, interference_w, noise_w))
-    rank = np.argsort(order, axis=-1)  # position of each robot in the decoding order
-    # stronger[u] = sum of p_v over the robots v decoded after u (rank_v > rank_u): a U x U mask, cheaper
-    # than sorting and scattering back for the few robots of one NOMA cluster.
-    stronger = ((rank[..., None, :] > rank[..., :, None]) * power_w[..., None, :]).sum(axis=-1)
-    sinr = power_w * gain / (gain * stronger + interference_w + noise_w)
-    return sinr, order
+    # The power of the robots decoded after u, summed from the strongest down (an exclusive cumulative sum
+    # over the reversed decoding order), then scattered back to robot order. One mission indexes directly
+    # (the env's per-step path); a batch gathers along the robot axis.
+    from_strongest_order = order[..., ::-1]
+    if power_w.ndim == 1:
+        from_strongest = power_w[from_strongest_order]
+    else:
+        from_strongest = np.take_along_axis(power_w, from_strongest_order, axis=-1)
+    stronger_sorted = np.zeros_like(from_strongest)
+    np.cumsum(from_strongest[..., :-1], axis=-1, out=stronger_sorted[..., 1:])
+    stronger = np.empty_like(stronger_sorted)
+    if power_w.ndim == 1:
+        stronger[from_strongest_order] = stronger_sorted
+    else:
+        np.put_along_axis(stronger, from_strongest_order, stronger_sorted, axis=-1)
+    return sic_sinr(power_w, gain, stronger, interference_w, noise_w), order
 
 
 def oma_sinr(
@@ -112,7 +141,7 @@ def oma_sinr(
     noise_w_per_robot: float | np.ndarray,
 ) -> np.ndarray:
     """
-    Downlink OMA (FDMA) SINR (SPEC 2.6): each robot has its own band ``B = W / U``, which carries a
+    Downlink OMA (FDMA) SINR (docs/MODEL.md, OMA): each robot has its own band ``B = W / U``, which carries a
     ``1/U`` share of the interference spread over ``W``:
     ``SINR_u = p_u g_u / (I_u / U + N0 B)``.
 
@@ -122,13 +151,12 @@ def oma_sinr(
     :param noise_w_per_robot: noise power over one robot's band, ``N0 B`` in watts
     :return: linear SINRs, shape (..., U)
     """
-    n_robots = np.shape(power_w)[-1]
-    return power_w * gain / (interference_w / n_robots + noise_w_per_robot)
+    return fdma_sinr(power_w, gain, interference_w, np.shape(power_w)[-1], noise_w_per_robot)
 
 
 def shannon_rate(sinr: np.ndarray, bandwidth_hz: float) -> np.ndarray:
     """
-    Achievable rate ``B log2(1 + SINR)`` in bit/s (paper eq. (11)).
+    Achievable rate ``B log2(1 + SINR)`` in bit/s (paper Eq. (12)).
 
     :param sinr: linear SINRs
     :param bandwidth_hz: bandwidth ``B`` in Hz
@@ -139,7 +167,7 @@ def shannon_rate(sinr: np.ndarray, bandwidth_hz: float) -> np.ndarray:
 
 def sinr_to_db(sinr: np.ndarray) -> np.ndarray:
     """Linear SINR to dB, floored at :data:`SINR_DB_FLOOR` (0 W gives the floor, not -inf)."""
-    return 10.0 * np.log10(np.maximum(sinr, _SINR_FLOOR))
+    return linear_to_db(sinr, _SINR_FLOOR)
 
 
 def downlink(
@@ -151,7 +179,7 @@ def downlink(
     multiple_access: MultipleAccess = "noma",
 ) -> DownlinkResult:
     """
-    Rates, SINRs and the decoding order of one downlink transmission to U robots (SPEC 2.6).
+    Rates, SINRs and the decoding order of one downlink transmission to U robots (paper Eq. (11)-(12)).
 
     NOMA uses the whole cluster band ``W = U B`` for every robot, with SIC; OMA gives each robot its own
     band ``B``. In both modes the decoding order is the order of the equivalent gains ``G_u``
@@ -190,11 +218,12 @@ def single_transmission(
     multiple_access: MultipleAccess = "noma",
 ) -> tuple[np.ndarray, DownlinkResult]:
     """
-    :func:`allocate_power` followed by :func:`downlink` for one transmission, computed on Python floats.
+    :func:`allocate_power` then :func:`downlink` for one mission, on Python floats: the env's per-step fast
+    path (numpy calls on arrays of U = 2 elements cost more than the arithmetic; ``benchmarks/env_speed.py``).
 
-    This is the env's per-step path: for the few robots of one cluster, plain float arithmetic is several
-    times faster than numpy calls on arrays of U elements (the env's speed bar). The tests check that it
-    equals the vectorised functions.
+    The SINRs come from the same :func:`sic_sinr` / :func:`fdma_sinr`, the rates and dB values from
+    :func:`shannon_rate` and :func:`sinr_to_db`; only the loops over the robots are written out. The tests
+    check that it gives the same bits as the batched functions.
 
     :param power_actions: power actions ``a_u`` (U floats), clipped to [-1, 1]
     :param gain: linear channel gains ``g_u`` (U floats)
@@ -206,36 +235,43 @@ def single_transmission(
     :return: the allocated powers (U,) and the :class:`DownlinkResult`
     """
     n_robots = len(power_actions)
-    power = [0.5 * max_power_w * (min(max(a, -1.0), 1.0) + 1.0) for a in power_actions]
+    # allocate_power() on floats: Python's sum adds left to right, like sequential_sum
+    power = [(0.5 * max_power_w) * (min(max(a, -1.0), 1.0) + 1.0) for a in power_actions]
     total = sum(power)
     if total > max_power_w:
         power = [p * (max_power_w / total) for p in power]
     cluster_band_hz = n_robots * bandwidth_per_robot_hz
     cluster_noise_w = noise_w_per_hz * cluster_band_hz
-    equivalent = [g / (i + cluster_noise_w) for g, i in zip(gain, interference_w, strict=True)]
+    equivalent = [equivalent_gain(g, i, cluster_noise_w) for g, i in zip(gain, interference_w, strict=True)]
     order = sorted(range(n_robots), key=equivalent.__getitem__)  # stable, like decoding_order()
     sinr = [0.0] * n_robots
     if multiple_access == "noma":
         stronger = 0.0
-        for u in reversed(order):  # from the strongest: its stronger robots' power is already summed
-            sinr[u] = power[u] * gain[u] / (gain[u] * stronger + interference_w[u] + cluster_noise_w)
+        for u in reversed(order):  # from the strongest down, like noma_sinr's cumulative sum
+            sinr[u] = sic_sinr(power[u], gain[u], stronger, interference_w[u], cluster_noise_w)
             stronger += power[u]
         band_hz = cluster_band_hz
     elif multiple_access == "oma":
         noise_w = noise_w_per_hz * bandwidth_per_robot_hz
-        for u in range(n_robots):
-            sinr[u] = power[u] * gain[u] / (interference_w[u] / n_robots + noise_w)
+        sinr = [fdma_sinr(p, g, i, n_robots, noise_w) for p, g, i in zip(power, gain, interference_w, strict=True)]
         band_hz = bandwidth_per_robot_hz
     else:
         raise ValueError(f"multiple_access must be one of {MULTIPLE_ACCESS}, got {multiple_access!r}")
+    sinr_array = np.array(sinr)
     result = DownlinkResult(
-        rate_bps=np.array([band_hz * math.log2(1.0 + x) for x in sinr]),
-        sinr_db=np.array([10.0 * math.log10(max(x, _SINR_FLOOR)) for x in sinr]),
+        rate_bps=shannon_rate(sinr_array, band_hz),
+        sinr_db=sinr_to_db(sinr_array),
         decoding_order=np.array(order, dtype=np.int64),
     )
     return np.array(power), result
 
 
 def in_outage(rate_bps: np.ndarray, qos_rate_bps: float) -> np.ndarray:
-    """Outage (SPEC 2.6, paper eq. (12)): ``rate_u < qos_rate_bps``, as a bool array."""
+    """
+    Outage (paper Eq. (13)): a robot whose rate falls below the QoS rate, ``rate_u < qos_rate_bps``.
+
+    :param rate_bps: rates in bit/s, any shape
+    :param qos_rate_bps: the QoS rate in bit/s
+    :return: bool array, the shape of ``rate_bps``
+    """
     return rate_bps < qos_rate_bps

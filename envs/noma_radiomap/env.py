@@ -1,6 +1,5 @@
-"""The NOMA indoor radio-map environment (SPEC 2.7-2.10)."""
+"""The NOMA indoor radio-map environment (the paper's Sections II-IV; docs/MODEL.md, docs/ARCHITECTURE.md)."""
 
-import math
 import os
 from typing import Any, ClassVar
 
@@ -8,16 +7,58 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from noma_radiomap import geometry
-from noma_radiomap.downlink import MULTIPLE_ACCESS, single_transmission
+from noma_radiomap import geometry, rewards
+from noma_radiomap.downlink import MULTIPLE_ACCESS, DownlinkResult, in_outage, single_transmission
 from noma_radiomap.motion import GridMotion
-from noma_radiomap.propagation import EXPECTED_FADING_DB, db_to_linear, dbm_to_watt
+from noma_radiomap.propagation import (
+    dbm_to_watt,
+    faded_gain,
+    interference_power,
+    linear_to_db,
+    rayleigh_fading,
+)
 from noma_radiomap.radiomap import RadioMap
 from noma_radiomap.scenario import Scenario, load_scenario
 
 CHANNELS: tuple[str, ...] = ("radio_map", "rayleigh")
-_TINY = float(np.finfo(np.float64).tiny)
 INDUCING: tuple[str, ...] = ("euclidean", "geodesic")
+
+
+def mission_observation(
+    positions: np.ndarray,
+    destinations: np.ndarray,
+    gain_db: np.ndarray,
+    arrived: np.ndarray,
+    room_size: np.ndarray,
+    gain_db_range: tuple[float, float],
+) -> np.ndarray:
+    """
+    The observation of missions (class docstring of :class:`NomaRadioMapEnv`, Observation Space): per robot
+    its position and destination scaled onto [-1, 1], its AP gain in dB mapped from ``gain_db_range`` onto
+    [-1, 1] (clipped) and its arrived flag.
+
+    :param positions: robot positions in metres, shape (..., U, 2)
+    :param destinations: destinations in metres, shape (..., U, 2)
+    :param gain_db: AP channel gains in dB, shape (..., U)
+    :param arrived: arrived flags, shape (..., U)
+    :param room_size: ``(width, depth)`` in metres
+    :param gain_db_range: the gains mapped onto -1 and 1
+    :return: float32 array of shape (..., 6 U)
+    """
+    scale = 2.0 / np.asarray(room_size, dtype=np.float64)
+    low, high = gain_db_range
+    gain_scale, gain_offset = 2.0 / (high - low), -(high + low) / (high - low)
+    gain = np.minimum(np.maximum(np.asarray(gain_db) * gain_scale + gain_offset, -1.0), 1.0)
+    per_robot = np.concatenate(
+        [
+            np.asarray(positions) * scale - 1.0,
+            np.asarray(destinations) * scale - 1.0,
+            gain[..., None],
+            np.asarray(arrived, dtype=np.float64)[..., None],
+        ],
+        axis=-1,
+    )
+    return per_robot.reshape(*per_robot.shape[:-2], -1).astype(np.float32)
 
 
 class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -32,7 +73,7 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     ``MQI = t_total - sum_u (T_u + lambda outage_u)`` rewards short missions with few outage steps.
 
     The channel comes from a pre-computed radio map (:class:`noma_radiomap.RadioMap`): ITU-R P.1238 path
-    loss with obstacle counting (SPEC 2.2-2.5), plus Rayleigh fading, either at its expectation (the paper's
+    loss with obstacle counting (paper Eq. (1)-(4), (17)), plus Rayleigh fading, either at its expectation (the paper's
     radio-map training, deterministic) or drawn fresh every step ("reality").
 
     ## Action Space
@@ -45,7 +86,7 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     | 3u + 1   | y velocity; the displacement is clipped to norm ``V_max dt``  | -1  | 1   |
     | 3u + 2   | power: ``p_u = P_max (a + 1) / 2``, all scaled down to sum ``P_max`` if more | -1 | 1 |
 
-    Robots move in sub-steps of at most half a cell and slide along walls (SPEC 2.7); an arrived robot's
+    Robots move in sub-steps of at most half a cell and slide along walls (paper Sec. IV-D); an arrived robot's
     actions are ignored and it gets no power.
 
     ## Observation Space
@@ -85,9 +126,11 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Episode End
 
-    Terminates when every robot has arrived (within ``arrival_radius`` of its destination). Truncates after
-    the scenario's ``mission.max_steps`` steps (the registered ids also apply a ``TimeLimit`` of 300, the
-    ``mall`` value; pass ``max_episode_steps=`` to ``gymnasium.make`` for scenarios with longer missions).
+    Terminates when every robot has arrived (within ``arrival_radius`` of its destination). Truncation is left
+    to Gymnasium's ``TimeLimit``: the registered ids wrap the env in one of the scenario's ``mission.max_steps``
+    steps (:func:`noma_radiomap.registration.make_env`), so ``spec.max_episode_steps`` follows the scenario. The
+    end-of-mission figures (``mqi``, ...) come in the ``info`` of the step that terminates or reaches
+    ``max_steps``.
 
     ## Arguments
 
@@ -118,17 +161,8 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
-    REWARD_PHASES: ClassVar[tuple[str, ...]] = ("destination", "mqi", "combined")
-    REWARD_COMPONENTS: ClassVar[tuple[str, ...]] = ("time", "inducing", "qos", "arrival", "success")
-    _PHASE_TERMS: ClassVar[dict[str, tuple[str, ...]]] = {
-        "destination": ("time", "inducing", "arrival", "success"),
-        "mqi": ("time", "qos", "arrival", "success"),
-        "combined": ("time", "inducing", "qos", "arrival", "success"),
-    }
-    #: Constants of the paper's reward (Sec. IV): time cost, arrival and success rewards.
-    TIME_COST: ClassVar[float] = -1.0
-    ARRIVAL_REWARD: ClassVar[float] = 10.0
-    SUCCESS_REWARD: ClassVar[float] = 200.0
+    REWARD_PHASES: ClassVar[tuple[str, ...]] = rewards.REWARD_PHASES
+    REWARD_COMPONENTS: ClassVar[tuple[str, ...]] = rewards.REWARD_COMPONENTS
     #: Channel gains (dB) mapped onto the observation's [-1, 1]. On the free cells of the built-in scenarios
     #: the AP gain with the expected fading lies in [-96, -46.5] dB (-46.5 dB: LoS at the 2 m antenna
     #: offset); Rayleigh fading moves it by -30 to +8.4 dB at the 0.1 % tails of Exp(1), which the range
@@ -154,59 +188,75 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        if isinstance(scenario, Scenario):
-            self.scenario = scenario
-        elif isinstance(scenario, str | os.PathLike):
-            self.scenario = load_scenario(scenario)
-        else:
-            raise ValueError(f"scenario must be a scenario name, a YAML path or a Scenario, got {scenario!r}")
+        self.scenario = self._load(scenario)
         self.multiple_access = multiple_access
         self.channel = channel
-        self.reward_phase = reward_phase
         self.inducing = inducing
         self.render_mode = render_mode
-
-        sc = self.scenario
-        self.n_robots = sc.n_robots
-        self.max_steps = sc.mission.max_steps
-        self.radio_map = RadioMap.for_scenario(sc)
-        blocked = np.asarray(self.radio_map.blocked, dtype=bool)
-        self._resolution = sc.room.resolution
-        self._grid_shape = blocked.shape
-        self._room = np.array([sc.room.width, sc.room.depth])
-        self._d_max = float(np.hypot(sc.room.width, sc.room.depth))
+        self.n_robots = self.scenario.n_robots
+        self.max_steps = self.scenario.mission.max_steps
+        self.radio_map = RadioMap.for_scenario(self.scenario)
         self._motion = GridMotion(
-            blocked,
-            sc.room.resolution,
-            sc.room.width,
-            sc.room.depth,
-            max_step=sc.robot.v_max * sc.mission.time_step,
-            arrival_radius=sc.robot.arrival_radius,
+            self.radio_map.blocked,
+            self.scenario.room,
+            max_step=self.scenario.robot.v_max * self.scenario.mission.time_step,
+            arrival_radius=self.scenario.robot.arrival_radius,
         )
-        self._components = geometry.free_components(blocked)
+        self._components = geometry.free_components(self.radio_map.blocked)
+        self._setup_channel()
+        self._setup_rewards(reward_phase)
+        self._mission_choices = self._setup_missions()
 
-        # Channel: linear path gains of every transmitter (AP first), with the expected fading folded in
-        # for the radio-map channel (SPEC 2.4).
-        names = sc.transmitter_names
-        path_gain_db = -np.stack([self.radio_map.path_loss_db[name] for name in names])
-        if channel == "radio_map":
-            path_gain_db = path_gain_db + EXPECTED_FADING_DB
-        # One row per cell (flat index ix * ny + iy), one column per transmitter: a single gather per step.
-        self._gain_table = db_to_linear(path_gain_db).reshape(len(names), -1).T.copy()
+        self.action_space = spaces.Box(-1.0, 1.0, (3 * self.n_robots,), dtype=np.float32)
+        self.observation_space = spaces.Box(-1.0, 1.0, (6 * self.n_robots,), dtype=np.float32)
+
+        self.positions = np.zeros((self.n_robots, 2))
+        self.destinations = np.zeros((self.n_robots, 2))
+        self.arrived = np.zeros(self.n_robots, dtype=bool)
+        self._arrival_step = np.full(self.n_robots, self.max_steps, dtype=np.int64)
+        self._outage_steps = np.zeros(self.n_robots, dtype=np.int64)
+        self._gain_db = np.zeros(self.n_robots)
+        self._trajectory: list[np.ndarray] = []
+        self._distance_maps = np.zeros((self.n_robots, 0))
+        self.step_count = 0
+        self._renderer = None
+
+    @staticmethod
+    def _load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
+        if isinstance(scenario, Scenario):
+            return scenario
+        if isinstance(scenario, str | os.PathLike):
+            return load_scenario(scenario)
+        raise ValueError(f"scenario must be a scenario name, a YAML path or a Scenario, got {scenario!r}")
+
+    def _setup_channel(self) -> None:
+        """Per-cell gain table and the radio constants of the downlink."""
+        sc = self.scenario
+        # One row per cell (flat index ix * ny + iy), one column per transmitter (AP first): a single gather
+        # per step. The radio-map channel has the expected fading folded in; the Rayleigh channel draws it.
+        gains = self.radio_map.gain if self.channel == "radio_map" else self.radio_map.path_gain
+        table = np.stack([gains[name] for name in sc.transmitter_names])
+        self._gain_table = table.reshape(len(table), -1).T.copy()
         self._interferer_power_w = dbm_to_watt(np.array([i.power_dbm for i in sc.interferers], dtype=np.float64))
-        self._interferer_power_list = self._interferer_power_w.tolist()
         self._max_power_w = float(dbm_to_watt(sc.ap.max_power_dbm))
         self._noise_w_per_hz = float(dbm_to_watt(sc.radio.noise_dbm_per_hz))
-        self._bandwidth_hz = sc.radio.bandwidth_per_robot_hz
-        self._qos_bps = sc.radio.qos_rate_bps
-        self._outage_penalty = sc.mission.outage_penalty
-        # Affine maps onto the observation's [-1, 1] (class docstring, Observation Space).
-        self._position_scale = 2.0 / self._room
-        low, high = self.GAIN_DB_RANGE
-        self._gain_scale, self._gain_offset = 2.0 / (high - low), -(high + low) / (high - low)
+        self._room_size = np.array([sc.room.width, sc.room.depth])
 
-        # Missions: per robot, its destinations and the free start cells not already at each of them.
-        self._mission_choices: list[list[tuple[np.ndarray, np.ndarray]]] = []
+    def _setup_rewards(self, reward_phase: str) -> None:
+        mission = self.scenario.mission
+        self._reward_constants = rewards.RewardConstants(
+            time_cost=mission.time_cost,
+            outage_penalty=mission.outage_penalty,
+            arrival_reward=mission.arrival_reward,
+            success_reward=mission.success_reward,
+        )
+        self._d_max = self.scenario.room.d_max
+        self.set_reward_phase(reward_phase)
+
+    def _setup_missions(self) -> list[list[tuple[np.ndarray, np.ndarray]]]:
+        """Per robot, its destinations and the free start cells not already at each of them."""
+        sc = self.scenario
+        missions = []
         for u, robot in enumerate(sc.robots):
             centres = (self.radio_map.start_cells(u) + 0.5) * sc.room.resolution
             choices = []
@@ -219,23 +269,8 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
                         f"destination {list(destination)}"
                     )
                 choices.append((goal, centres[far]))
-            self._mission_choices.append(choices)
-
-        self.action_space = spaces.Box(-1.0, 1.0, (3 * self.n_robots,), dtype=np.float32)
-        self.observation_space = spaces.Box(-1.0, 1.0, (6 * self.n_robots,), dtype=np.float32)
-
-        self.positions = np.zeros((self.n_robots, 2))
-        self.destinations = np.zeros((self.n_robots, 2))
-        self.arrived = np.zeros(self.n_robots, dtype=bool)
-        self._arrival_step = [self.max_steps] * self.n_robots
-        self._outage_steps = [0] * self.n_robots
-        self._gain_db = np.zeros(self.n_robots)
-        self._destination_obs: list[list[float]] = []
-        self._destination_list: list[list[float]] = []
-        self._trajectory: list[np.ndarray] = []
-        self._distance_maps: list[np.ndarray] = []
-        self.step_count = 0
-        self._renderer = None
+            missions.append(choices)
+        return missions
 
     # --- reward phases ---------------------------------------------------------------------------
     def set_reward_phase(self, name: str) -> None:
@@ -244,8 +279,7 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
         :param name: one of :attr:`REWARD_PHASES`
         """
-        if name not in self.REWARD_PHASES:
-            raise ValueError(f"reward_phase must be one of {self.REWARD_PHASES}, got {name!r}")
+        self._weights = rewards.phase_weights(name)
         self.reward_phase = name
 
     def reward_weights(self, phase: str | None = None) -> dict[str, float]:
@@ -256,126 +290,133 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         :param phase: a reward phase; None: the current one
         :return: a weight (0 or 1) for each of :attr:`REWARD_COMPONENTS`
         """
-        phase = self.reward_phase if phase is None else phase
-        if phase not in self.REWARD_PHASES:
-            raise ValueError(f"phase must be one of {self.REWARD_PHASES}, got {phase!r}")
-        terms = self._PHASE_TERMS[phase]
-        return {name: float(name in terms) for name in self.REWARD_COMPONENTS}
+        return rewards.phase_weights(self.reward_phase if phase is None else phase)
 
     # --- Gymnasium API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
-        options = {} if options is None else dict(options)
-        unknown = set(options) - {"starts", "destinations"}
-        if unknown:
-            raise ValueError(f"options: unknown keys {sorted(unknown)}, expected 'starts' and/or 'destinations'")
-        destinations = self._option_points(options, "destinations")
-        starts = self._option_points(options, "starts")
-        if destinations is None:
-            destinations = np.empty((self.n_robots, 2))
-            for u, choices in enumerate(self._mission_choices):
-                destinations[u] = choices[self.np_random.integers(len(choices))][0]
-        if starts is None:
-            starts = np.empty((self.n_robots, 2))
-            for u, choices in enumerate(self._mission_choices):
-                candidates = self._start_candidates(u, destinations[u], choices)
-                starts[u] = candidates[self.np_random.integers(len(candidates))]
-        self._check_mission(starts, destinations)
-
+        starts, destinations = self._draw_mission(options)
         self.positions = starts
         self.destinations = destinations
         self.arrived = np.zeros(self.n_robots, dtype=bool)
-        self._arrival_step = [self.max_steps] * self.n_robots
-        self._outage_steps = [0] * self.n_robots
+        self._arrival_step = np.full(self.n_robots, self.max_steps, dtype=np.int64)
+        self._outage_steps = np.zeros(self.n_robots, dtype=np.int64)
         self.step_count = 0
         self._trajectory = [starts.copy()]
         if self.inducing == "geodesic":
-            self._distance_maps = [self.radio_map.distance_field(d) for d in destinations]
-        self._destination_obs = (destinations * self._position_scale - 1.0).tolist()
-        self._destination_list = destinations.tolist()
-        gain_ap, _ = self._channel(starts.tolist())
-        self._gain_db = np.array([10.0 * math.log10(max(g, _TINY)) for g in gain_ap])
+            self._distance_maps = np.stack([self.radio_map.distance_field(d).ravel() for d in destinations])
+        self._channel()
         if self.render_mode == "human":
             self.render()
-        return self._observation(), {}
+        return self._get_obs(), {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         action = np.asarray(action, dtype=np.float64).reshape(self.n_robots, 3)
-        was_arrived = self.arrived
-        positions, at_goal = self._motion.move(self.positions, action[:, :2], self.destinations, ~was_arrived)
+        # Robots that arrived before this step are inactive: no motion, no power, no time cost, no outage.
+        active = ~self.arrived
+        arriving = self._move(action[:, :2], active)
+        gain, interference = self._channel()
+        power, result, outage = self._downlink(action[:, 2], gain, interference, active)
+        components = self._rewards(active, arriving, outage)
+        reward = self._reward(components)
+        terminated = self._is_terminated()
+        self._outage_steps += outage
+        self._arrival_step[arriving] = self.step_count
+        info = self._info(components, power, result, outage, end=terminated or self.step_count >= self.max_steps)
+        if self.render_mode == "human":
+            self.render()
+        # Truncation is the TimeLimit's (registration.make_env), at the scenario's mission.max_steps.
+        return self._get_obs(), reward, terminated, False, info
+
+    # --- the stages of a step --------------------------------------------------------------------
+    def _move(self, motion: np.ndarray, active: np.ndarray) -> np.ndarray:
+        """Motion: move the active robots (sub-steps, wall sliding); return the robots arriving on this step."""
+        positions, at_goal = self._motion.move(self.positions, motion, self.destinations, active)
         self.positions = positions
-        self.arrived = was_arrived | at_goal
+        self.arrived = self.arrived | at_goal
         self.step_count += 1
         self._trajectory.append(positions)
+        return at_goal & active
 
-        # Per-robot work on Python floats: U is small, and numpy calls on arrays of U elements cost more
-        # than the arithmetic (the env's speed bar, SPEC 2.7). Robots that arrived before this step are
-        # inactive: no power, no time cost, no outage (SPEC 2.7, 2.9).
-        points = positions.tolist()
-        active = [not a for a in was_arrived.tolist()]
-        arriving = [a and b for a, b in zip(at_goal.tolist(), active, strict=True)]
-        gain_ap, interference = self._channel(points)
-        power_actions = [a if is_active else -1.0 for a, is_active in zip(action[:, 2].tolist(), active, strict=True)]
+    def _channel(self) -> tuple[np.ndarray, np.ndarray]:
+        """Channel at the robots' positions: the linear AP gain and the interference power (U,) each."""
+        gains = self._gain_table[self.scenario.room.flat_cell_index(self.positions)]  # (U, transmitters)
+        if self.channel == "rayleigh":
+            gains = faded_gain(gains, rayleigh_fading(self.np_random, gains.shape))
+        gain = gains[:, 0]
+        self._gain_db = linear_to_db(gain)
+        return gain, interference_power(gains[:, 1:], self._interferer_power_w)
+
+    def _downlink(
+        self, power_actions: np.ndarray, gain: np.ndarray, interference: np.ndarray, active: np.ndarray
+    ) -> tuple[np.ndarray, DownlinkResult, np.ndarray]:
+        """Downlink: the allocated powers (arrived robots get none), rates and SINRs, and the outage of the active robots."""
+        radio = self.scenario.radio
+        # single_transmission: allocate_power + downlink on Python floats, the same bits (tests/test_downlink.py)
         power, result = single_transmission(
-            power_actions,
-            gain_ap,
-            interference,
+            np.where(active, power_actions, -1.0).tolist(),
+            gain.tolist(),
+            interference.tolist(),
             self._max_power_w,
-            self._bandwidth_hz,
+            radio.bandwidth_per_robot_hz,
             self._noise_w_per_hz,
             self.multiple_access,
         )
-        qos = self._qos_bps
-        outage_list = [rate < qos and is_active for rate, is_active in zip(result.rate_bps.tolist(), active, strict=True)]
-        self._gain_db = np.array([10.0 * math.log10(max(g, _TINY)) for g in gain_ap])  # |h|^2 = 0 has p ~ 2^-53
+        return power, result, in_outage(result.rate_bps, radio.qos_rate_bps) & active
 
-        n_active, n_arriving, n_outage = sum(active), sum(arriving), sum(outage_list)
-        terminated = bool(self.arrived.all())
-        inducing = 0.0
-        for d, is_active in zip(self._distances(points), active, strict=True):
-            if is_active:
-                inducing += 1.0 - d / self._d_max
-        components = {
-            "time": self.TIME_COST * n_active + 0.0,
-            "inducing": inducing,
-            "qos": 0.0 - self._outage_penalty * n_outage,
-            "arrival": self.ARRIVAL_REWARD * n_arriving,
-            "success": self.SUCCESS_REWARD if terminated and n_arriving else 0.0,  # once, on the last arrival
-        }
-        reward = 0.0
-        for name in self._PHASE_TERMS[self.reward_phase]:
-            reward += components[name]
+    def _distances(self) -> np.ndarray:
+        """Distance of each robot to its destination: Euclidean, or geodesic on the grid (``inducing``)."""
+        if self.inducing == "euclidean":
+            return geometry.distance(self.positions, self.destinations)
+        cells = self.scenario.room.flat_cell_index(self.positions)
+        return self._distance_maps[np.arange(self.n_robots), cells]
 
-        for u in range(self.n_robots):
-            self._outage_steps[u] += outage_list[u]
-            if arriving[u]:
-                self._arrival_step[u] = self.step_count
-        truncated = not terminated and self.step_count >= self.max_steps
+    def _rewards(self, active: np.ndarray, arriving: np.ndarray, outage: np.ndarray) -> dict[str, float]:
+        """The named reward components of the step (``info["reward_components"]``)."""
+        distance = self._distances()
+        components = rewards.reward_components(active, arriving, outage, distance, self._d_max, self._reward_constants)
+        return {name: float(value) for name, value in components.items()}
+
+    def _reward(self, components: dict[str, float]) -> float:
+        """The reward of the current phase: the weighted sum of the components."""
+        return float(rewards.weighted_reward(components, self._weights))
+
+    def _is_terminated(self) -> bool:
+        """Every robot has arrived."""
+        return bool(self.arrived.all())
+
+    def _info(
+        self, components: dict[str, float], power: np.ndarray, result: DownlinkResult, outage: np.ndarray, end: bool
+    ) -> dict[str, Any]:
         info: dict[str, Any] = {
             "reward_components": components,
             "rate_bps": result.rate_bps,
             "sinr_db": result.sinr_db,
-            "outage": np.array(outage_list, dtype=bool),
+            "outage": outage,
             "power_w": power,
             "gain_db": self._gain_db,
             "decoding_order": result.decoding_order,
         }
-        if terminated or truncated:
+        if end:
             info.update(self.episode_summary())
-        if self.render_mode == "human":
-            self.render()
-        return self._observation(), reward, terminated, truncated, info
+        return info
+
+    def _get_obs(self) -> np.ndarray:
+        return mission_observation(
+            self.positions, self.destinations, self._gain_db, self.arrived, self._room_size, self.GAIN_DB_RANGE
+        )
 
     def episode_summary(self) -> dict[str, Any]:
         """
-        The end-of-episode figures (SPEC 2.9), as of the current step.
+        The end-of-episode figures (paper Eq. (13)-(14)), as of the current step.
 
         :return: ``is_success`` (all arrived), ``mqi``, ``mission_time`` (per robot, ``T_u``: steps until
             arrival, ``max_steps`` if not arrived) and ``outage_steps`` (per robot)
         """
+        mission = self.scenario.mission
         mission_time = np.where(self.arrived, self._arrival_step, self.max_steps).astype(np.int64)
-        outage_steps = np.array(self._outage_steps, dtype=np.int64)
-        mqi = self.scenario.mission.t_total - float((mission_time + self._outage_penalty * outage_steps).sum())
+        outage_steps = self._outage_steps.copy()
+        mqi = float(rewards.mission_quality_indicator(mission.t_total, mission_time, outage_steps, mission.outage_penalty))
         return {
             "is_success": bool(self.arrived.all()),
             "mqi": mqi,
@@ -411,39 +452,26 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         state["_renderer"] = None  # matplotlib figures are rebuilt on demand
         return state
 
-    # --- internals -------------------------------------------------------------------------------
-    def _channel(self, points: list[list[float]]) -> tuple[list[float], list[float]]:
-        """Linear AP gain and interference power over the cluster band (U floats each) at the points ``[x, y]``."""
-        gains = self._gain_table[[self._flat_cell(x, y) for x, y in points]]  # (U, transmitters), AP first
-        if self.channel == "rayleigh":
-            gains = gains * self.np_random.exponential(size=gains.shape)
-        # Interferers spread their power over the cluster band W (SPEC 2.6).
-        interferer_power = self._interferer_power_list
-        rows = gains.tolist()
-        return [row[0] for row in rows], [sum(p * g for p, g in zip(interferer_power, row[1:], strict=True)) for row in rows]
-
-    def _flat_cell(self, x: float, y: float) -> int:
-        """Flat index ``ix * ny + iy`` of the cell of a point of the room."""
-        nx, ny = self._grid_shape
-        return min(int(x / self._resolution), nx - 1) * ny + min(int(y / self._resolution), ny - 1)
-
-    def _distances(self, points: list[list[float]]) -> list[float]:
-        """Distance of each robot to its destination: Euclidean, or geodesic on the grid (``inducing``)."""
-        if self.inducing == "euclidean":
-            return [math.hypot(x - gx, y - gy) for (x, y), (gx, gy) in zip(points, self._destination_list, strict=True)]
-        return [float(field.flat[self._flat_cell(x, y)]) for (x, y), field in zip(points, self._distance_maps, strict=True)]
-
-    def _observation(self) -> np.ndarray:
-        # Built from Python floats for the same reason as the bookkeeping in step().
-        scale_x, scale_y = self._position_scale.tolist()
-        gain_scale, gain_offset = self._gain_scale, self._gain_offset
-        values: list[float] = []
-        for (x, y), destination, gain_db, arrived in zip(
-            self.positions.tolist(), self._destination_obs, self._gain_db.tolist(), self.arrived.tolist(), strict=True
-        ):
-            gain = min(max(gain_db * gain_scale + gain_offset, -1.0), 1.0)
-            values += (x * scale_x - 1.0, y * scale_y - 1.0, *destination, gain, float(arrived))
-        return np.array(values, dtype=np.float32)
+    # --- missions --------------------------------------------------------------------------------
+    def _draw_mission(self, options: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
+        """Starts and destinations (U, 2) each: drawn from the scenario, or given in the reset options."""
+        options = {} if options is None else dict(options)
+        unknown = set(options) - {"starts", "destinations"}
+        if unknown:
+            raise ValueError(f"options: unknown keys {sorted(unknown)}, expected 'starts' and/or 'destinations'")
+        destinations = self._option_points(options, "destinations")
+        starts = self._option_points(options, "starts")
+        if destinations is None:
+            destinations = np.empty((self.n_robots, 2))
+            for u, choices in enumerate(self._mission_choices):
+                destinations[u] = choices[self.np_random.integers(len(choices))][0]
+        if starts is None:
+            starts = np.empty((self.n_robots, 2))
+            for u, choices in enumerate(self._mission_choices):
+                candidates = self._start_candidates(u, destinations[u], choices)
+                starts[u] = candidates[self.np_random.integers(len(candidates))]
+        self._check_mission(starts, destinations)
+        return starts, destinations
 
     def _start_candidates(self, u: int, destination: np.ndarray, choices: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
         for goal, candidates in choices:
@@ -477,8 +505,8 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         return points
 
     def _check_mission(self, starts: np.ndarray, destinations: np.ndarray) -> None:
-        start_labels = self._components[self.radio_map.cell_index(starts)]
-        goal_labels = self._components[self.radio_map.cell_index(destinations)]
+        start_labels = self._components[self.scenario.room.cell_index(starts)]
+        goal_labels = self._components[self.scenario.room.cell_index(destinations)]
         for u in range(self.n_robots):
             if start_labels[u] != goal_labels[u]:
                 raise ValueError(

@@ -1,7 +1,7 @@
-"""Robot motion on the occupancy grid: sub-steps, wall sliding and arrival (SPEC 2.7).
+"""Robot motion on the occupancy grid: sub-steps, wall sliding and arrival (paper Sec. IV-D; docs/MODEL.md, motion).
 
-The room is ``[0, width) x [0, depth)``, cut into square cells of side ``resolution``; cell ``(ix, iy)``
-spans ``[ix res, (ix + 1) res) x [iy res, (iy + 1) res)``. A point is *free* when it lies inside the
+The room is ``[0, width) x [0, depth)``, cut into square cells of side ``resolution``
+(:class:`~noma_radiomap.scenario.Room` maps points to cells). A point is *free* when it lies inside the
 room and its cell does not block motion. Positions are only ever moved to free points, so a robot
 never leaves the room nor stands in a blocked cell.
 """
@@ -10,12 +10,14 @@ import math
 
 import numpy as np
 
+from noma_radiomap.scenario import Room
+
 _TINY = float(np.finfo(np.float64).tiny)
 
 
 def clip_displacements(actions: np.ndarray, max_step: float) -> np.ndarray:
     """
-    Map motion actions to displacements (SPEC 2.7): ``(dx, dy) in [-1, 1]^2`` scaled by
+    Map motion actions to displacements (docs/MODEL.md, motion): ``(dx, dy) in [-1, 1]^2`` scaled by
     ``max_step = V_max time_step``, then shortened to a norm of at most ``max_step``.
 
     :param actions: motion actions, shape (..., 2); clipped to [-1, 1]
@@ -29,7 +31,8 @@ def clip_displacements(actions: np.ndarray, max_step: float) -> np.ndarray:
 
 class GridMotion:
     """
-    Moves robots on a grid with sub-steps and wall sliding (SPEC 2.7).
+    Moves robots on a grid with sub-steps and wall sliding (the paper's "the component of action
+    perpendicular to the contact surface will be cancelled", Sec. IV-D).
 
     A displacement is split into equal sub-steps no longer than half a cell, so that a sub-step crosses at
     most one cell boundary per axis and can never jump over a one-cell wall. A sub-step is taken
@@ -40,14 +43,13 @@ class GridMotion:
     A robot that comes within ``arrival_radius`` of its destination stops there (it has arrived).
 
     The sub-step loop runs over plain Python floats: with a handful of robots and 2-4 sub-steps it is
-    several times faster than numpy calls on arrays of two elements (the env's speed budget, SPEC 2.7).
+    several times faster than numpy calls on arrays of two elements (the env's speed budget,
+    ``benchmarks/env_speed.py``).
     When the bounding box of a whole move holds no blocked cell (a summed-area table lookup), the
     collision tests are skipped: the result is the same, since no sub-step can then enter a blocked cell.
 
-    :param blocked: cells that block motion, bool array of shape (nx, ny) indexed ``[ix, iy]``
-    :param resolution: cell side in metres
-    :param width: room extent along x in metres
-    :param depth: room extent along y in metres
+    :param blocked: cells that block motion, bool array of shape ``room.shape`` indexed ``[ix, iy]``
+    :param room: the room and its grid
     :param max_step: the longest displacement of one step, ``V_max time_step``, in metres
     :param arrival_radius: distance to the destination at which a robot has arrived, in metres
     """
@@ -55,21 +57,18 @@ class GridMotion:
     def __init__(
         self,
         blocked: np.ndarray,
-        resolution: float,
-        width: float,
-        depth: float,
+        room: Room,
         max_step: float,
         arrival_radius: float = 0.0,
     ) -> None:
         blocked = np.asarray(blocked, dtype=bool)
-        if blocked.ndim != 2:
-            raise ValueError(f"blocked must be a 2D (nx, ny) array, got shape {blocked.shape}")
-        if resolution <= 0:
-            raise ValueError(f"resolution must be > 0, got {resolution}")
+        if blocked.shape != room.shape:
+            raise ValueError(f"blocked must have the room's grid shape {room.shape}, got shape {blocked.shape}")
         self.blocked = blocked
-        self.resolution = float(resolution)
-        self.width = float(width)
-        self.depth = float(depth)
+        self.room = room
+        self.resolution = float(room.resolution)
+        self.width = float(room.width)
+        self.depth = float(room.depth)
         self.max_step = float(max_step)
         self.arrival_radius = float(arrival_radius)
         self._nx, self._ny = blocked.shape
@@ -79,6 +78,7 @@ class GridMotion:
         table = np.zeros((self._nx + 1, self._ny + 1), dtype=np.int64)
         table[1:, 1:] = blocked.cumsum(axis=0).cumsum(axis=1)
         self._blocked_count: list[list[int]] = table.tolist()
+        self._point_cell = room.point_cell
         self._n_substeps = max(1, math.ceil(self.max_step / (0.5 * self.resolution) - 1e-9))
 
     def is_free(self, xy: np.ndarray) -> np.ndarray:
@@ -88,18 +88,13 @@ class GridMotion:
         :param xy: points, shape (..., 2)
         :return: bool array of shape (...)
         """
-        xy = np.asarray(xy, dtype=float)
-        x, y = xy[..., 0], xy[..., 1]
-        inside = (x >= 0.0) & (x < self.width) & (y >= 0.0) & (y < self.depth)
-        ix = np.clip(np.floor(x / self.resolution), 0, self._nx - 1).astype(int)
-        iy = np.clip(np.floor(y / self.resolution), 0, self._ny - 1).astype(int)
-        return inside & ~self.blocked[ix, iy]
+        return self.room.contains(xy) & ~self.blocked[self.room.cell_index(xy)]
 
     def _cell(self, x: float, y: float) -> tuple[int, int] | None:
         """The cell of a point, or None when the point is outside the room or in a blocked cell."""
         if not (0.0 <= x < self.width and 0.0 <= y < self.depth):
             return None
-        ix, iy = min(int(x / self.resolution), self._nx - 1), min(int(y / self.resolution), self._ny - 1)
+        ix, iy = self._point_cell(x, y)
         return None if self._blocked_rows[ix][iy] else (ix, iy)
 
     def _box_clear(self, x0: float, y0: float, x1: float, y1: float) -> bool:
@@ -110,8 +105,9 @@ class GridMotion:
         low_y, high_y = min(y0, y1) - margin, max(y0, y1) + margin
         if low_x < 0.0 or low_y < 0.0 or high_x >= self.width or high_y >= self.depth:
             return False
-        ix0, iy0 = int(low_x / self.resolution), int(low_y / self.resolution)
-        ix1, iy1 = min(int(high_x / self.resolution), self._nx - 1) + 1, min(int(high_y / self.resolution), self._ny - 1) + 1
+        ix0, iy0 = self._point_cell(low_x, low_y)
+        ix1, iy1 = self._point_cell(high_x, high_y)
+        ix1, iy1 = ix1 + 1, iy1 + 1
         table = self._blocked_count
         return table[ix1][iy1] - table[ix0][iy1] - table[ix1][iy0] + table[ix0][iy0] == 0
 

@@ -1,4 +1,4 @@
-"""Non-learning reference policies (SPEC 4): the scale on which the learners' MQI means something.
+"""Non-learning reference policies (docs/RESULTS.md): the scale on which the learners' MQI means something.
 
 - :class:`RandomPlanner`: uniformly random actions (the floor).
 - :class:`ShortestPathPlanner`: the shortest collision-free path on the occupancy grid, followed at full
@@ -12,7 +12,7 @@ They read the true state of the env (positions, destinations, the radio map), so
 
 Path planning uses a cost per metre ``c(cell) = 1 + lambda o(cell)``: a robot moving at ``V_max``
 spends one step per ``V_max dt`` metres, and a step costs the MQI 1 (time) plus ``lambda`` when the
-robot is in outage (SPEC 2.9), so the cost of a path is the MQI it loses when ``o`` is the outage
+robot is in outage (paper Eq. (14)), so the cost of a path is the MQI it loses when ``o`` is the outage
 indicator. The shortest-path planner uses ``o = 0``.
 """
 
@@ -27,7 +27,7 @@ from scipy.sparse.csgraph import dijkstra
 from noma_radiomap import geometry
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
 from noma_radiomap.motion import GridMotion
-from noma_radiomap.propagation import EXPECTED_FADING_DB, db_to_linear, dbm_to_watt
+from noma_radiomap.propagation import dbm_to_watt
 
 __all__ = ["CommAwarePlanner", "GridPlanner", "RandomPlanner", "ShortestPathPlanner", "channel_maps", "grid_costs_to_goal"]
 
@@ -58,20 +58,13 @@ def channel_maps(env: Any) -> tuple[np.ndarray, np.ndarray]:
     """
     Expected (radio-map) channel of every cell: the linear AP gain and the interference power.
 
-    Both include the expected Rayleigh fading ``E[10 log10 |h|^2]`` (SPEC 2.4), i.e. they are exactly the
-    env's channel in ``channel="radio_map"`` mode and its expectation (in dB) in ``"rayleigh"`` mode.
+    Both include the expected Rayleigh fading ``E[10 log10 |h|^2]`` (paper Eq. (17)), i.e. they are exactly
+    the env's channel in ``channel="radio_map"`` mode and its expectation (in dB) in ``"rayleigh"`` mode.
 
-    :param env: the unwrapped env (its ``scenario`` and ``radio_map``)
+    :param env: the unwrapped env (its ``radio_map``)
     :return: ``gain`` (linear, nx x ny) and ``interference_w`` (watts over the cluster band, nx x ny)
     """
-    scenario, radio_map = env.scenario, env.radio_map
-    gain = db_to_linear(-radio_map.path_loss_db["ap"] + EXPECTED_FADING_DB)
-    interference = np.zeros_like(gain)
-    for interferer in scenario.interferers:
-        interference += dbm_to_watt(interferer.power_dbm) * db_to_linear(
-            -radio_map.path_loss_db[interferer.name] + EXPECTED_FADING_DB
-        )
-    return gain, interference
+    return env.radio_map.gain["ap"], env.radio_map.interference_w
 
 
 def _env_state(env: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -145,9 +138,7 @@ class GridPlanner:
             room = env.scenario.room
             self._motion = GridMotion(
                 env.radio_map.blocked,
-                room.resolution,
-                room.width,
-                room.depth,
+                room,
                 max_step=env.scenario.robot.v_max * env.scenario.mission.time_step,
             )
 

@@ -8,16 +8,18 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Expected Rayleigh fading in dB, ``E[10 log10 |h|^2]`` with ``|h|^2 ~ Exp(1)`` (SPEC 2.4).
+#: Expected Rayleigh fading in dB, ``E[10 log10 |h|^2]`` with ``|h|^2 ~ Exp(1)`` (paper Eq. (4) and (17)).
 #: For ``X ~ Exp(1)``, ``E[ln X] = -gamma`` (the Euler-Mascheroni constant), hence
 #: ``E[10 log10 X] = -10 gamma / ln 10 = -2.5068 dB`` — the paper's ``E(h)`` of Eq. (Radio.map),
-#: rounded to -2.51 dB in SPEC 2.4.
+#: -2.51 dB (docs/MODEL.md).
 EXPECTED_FADING_DB: float = float(-10.0 * np.euler_gamma / np.log(10.0))
 
 #: Path-loss distances are clipped to this minimum (metres): the ITU-R P.1238 model is only valid
-#: for d >= 1 m (SPEC 2.3), and without the clip a receiver right under the transmitter would get
+#: for d >= 1 m (docs/MODEL.md, decisions), and without the clip a receiver right under the transmitter would get
 #: a path loss below the free-space value at 1 m.
 MIN_DISTANCE_M: float = 1.0
+
+_TINY = float(np.finfo(np.float64).tiny)
 
 
 def path_loss_db(
@@ -29,7 +31,7 @@ def path_loss_db(
     wall_loss_step_db: float = 4.0,
 ) -> np.ndarray:
     """
-    Path loss in dB of the indoor model of the paper (ITU-R P.1238), SPEC 2.3:
+    Path loss in dB of the indoor model of the paper (ITU-R P.1238), paper Eq. (1)-(3):
 
     - LoS (``n == 0``): ``L = 16.9 log10(d) - 27.2 + 20 log10(f)``
     - NLoS (``n >= 1``): ``L = 20 log10(f) - 28 + N log10(d) + L_f(n)``,
@@ -90,21 +92,106 @@ def db_to_linear(value_db: np.ndarray | float) -> np.ndarray:
     return np.power(10.0, np.asarray(value_db, dtype=np.float64) / 10.0)
 
 
-def linear_to_db(value: np.ndarray | float) -> np.ndarray:
+def linear_to_db(value: np.ndarray | float, floor: float = _TINY) -> np.ndarray:
     """
-    Convert a linear power ratio to dB: ``10 log10(x)`` (``-inf`` for zero).
+    Convert a linear power ratio to dB, ``10 log10(max(x, floor))``: the floor keeps a zero ratio (a robot
+    given no power, a fade with ``|h|^2 = 0``) finite.
 
     :param value: linear ratio(s), >= 0
+    :param floor: the smallest ratio converted (default: the smallest normal float64, -3077 dB)
     :return: ratio(s) in dB
     """
-    with np.errstate(divide="ignore"):
-        return 10.0 * np.log10(np.asarray(value, dtype=np.float64))
+    return 10.0 * np.log10(np.maximum(value, floor))
+
+
+# --------------------------------------------------------------------------------------------------
+# The channel of a link: path gain, Rayleigh fading, interference. Leading axes are free, so one
+# mission (..., U) and a batch of missions (N, U) go through the same functions.
+# --------------------------------------------------------------------------------------------------
+
+
+def path_gain(path_loss_db: np.ndarray | float, fading_db: float = 0.0) -> np.ndarray:
+    """
+    Linear channel power gain of links from their path loss, ``g = 10^((-L + F) / 10)``: with ``F = 0`` the
+    path gain alone, with ``F =`` :data:`EXPECTED_FADING_DB` the radio-map channel (the paper's Eq.
+    (Radio.map), path loss plus the expected Rayleigh fading ``E(h)``).
+
+    :param path_loss_db: path losses ``L`` in dB (see :func:`path_loss_db`), any shape
+    :param fading_db: fading ``F`` in dB added to every link
+    :return: linear gains, the shape of ``path_loss_db``
+    """
+    return db_to_linear(-np.asarray(path_loss_db, dtype=np.float64) + fading_db)
+
+
+def expected_channel_gain(path_loss_db: np.ndarray | float) -> np.ndarray:
+    """
+    The radio-map channel: linear gain with the expected Rayleigh fading (paper Eq. (Radio.map)),
+    ``g = 10^((-L + E(h)) / 10)``, ``E(h) =`` :data:`EXPECTED_FADING_DB`.
+
+    :param path_loss_db: path losses ``L`` in dB, any shape
+    :return: linear gains, the shape of ``path_loss_db``
+    """
+    return path_gain(path_loss_db, EXPECTED_FADING_DB)
+
+
+def rayleigh_fading(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """
+    Rayleigh fading power ``|h|^2 ~ Exp(1)`` (unit mean), drawn independently per link.
+
+    :param rng: the random generator (the env's ``np_random``)
+    :param shape: the shape of the draws, e.g. ``(U, transmitters)`` or ``(N, U, transmitters)``
+    :return: fading powers, ``shape``
+    """
+    return rng.exponential(size=shape)
+
+
+def faded_gain(gain: np.ndarray, fading_power: np.ndarray) -> np.ndarray:
+    """
+    Channel gain of a link with small-scale fading, ``g |h|^2`` (paper Eq. (4); the "reality" channel).
+
+    :param gain: linear path gains ``g`` (:func:`path_gain` with ``fading_db=0``), any shape
+    :param fading_power: ``|h|^2`` (:func:`rayleigh_fading`), broadcastable to ``gain``
+    :return: linear gains
+    """
+    return gain * fading_power
+
+
+def interference_power(gain: np.ndarray, power_w: np.ndarray) -> np.ndarray:
+    """
+    Interference a receiver gets from the external transmitters, ``I = sum_i P_i g_i`` in watts, over the
+    whole cluster band ``W`` over which they spread their power (paper Eq. (6); docs/MODEL.md).
+
+    The sum runs left to right over the transmitters (:func:`sequential_sum`), so a batch gives the same
+    bits as one receiver.
+
+    :param gain: linear gains ``g_i`` from each interferer, shape (..., I)
+    :param power_w: transmit powers ``P_i`` in watts, shape (I,)
+    :return: interference powers in watts, shape (...); 0 without interferers
+    """
+    return sequential_sum(np.asarray(gain) * power_w)
+
+
+def sequential_sum(values: np.ndarray) -> np.ndarray:
+    """
+    Sum over the last axis from left to right, ``(((0 + x_0) + x_1) + ...)``.
+
+    numpy's ``sum`` adds pairwise, whose rounding depends on the length of the axis; the physics sums
+    over robots or transmitters in this fixed order so that one mission and a batch of missions give the
+    same bits.
+
+    :param values: shape (..., K)
+    :return: shape (...); 0 for ``K = 0``
+    """
+    values = np.asarray(values, dtype=np.float64)
+    if values.shape[-1] == 0:
+        return np.zeros(values.shape[:-1])
+    return np.cumsum(values, axis=-1)[..., -1]
 
 
 def noise_power_dbm(noise_dbm_per_hz: float, bandwidth_hz: np.ndarray | float) -> np.ndarray:
     """
     Thermal noise power over a band: ``N = N0 + 10 log10(bandwidth)`` in dBm (i.e. ``N0 x bandwidth``
-    in linear units, SPEC 2.6).
+    in linear units, docs/MODEL.md).
 
     :param noise_dbm_per_hz: noise power spectral density ``N0`` in dBm/Hz
     :param bandwidth_hz: bandwidth in Hz, > 0
@@ -114,14 +201,3 @@ def noise_power_dbm(noise_dbm_per_hz: float, bandwidth_hz: np.ndarray | float) -
     if np.any(bandwidth <= 0):
         raise ValueError(f"bandwidth_hz: must be > 0, got {bandwidth_hz!r}")
     return noise_dbm_per_hz + 10.0 * np.log10(bandwidth)
-
-
-def noise_power_w(noise_dbm_per_hz: float, bandwidth_hz: np.ndarray | float) -> np.ndarray:
-    """
-    Thermal noise power over a band in watts (``N0 x bandwidth``), see :func:`noise_power_dbm`.
-
-    :param noise_dbm_per_hz: noise power spectral density ``N0`` in dBm/Hz
-    :param bandwidth_hz: bandwidth in Hz, > 0
-    :return: noise power in watts
-    """
-    return dbm_to_watt(noise_power_dbm(noise_dbm_per_hz, bandwidth_hz))

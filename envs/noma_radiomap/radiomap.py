@@ -1,4 +1,4 @@
-"""The radio map of a scenario (SPEC 2.3, 2.5; the paper's Section III): path-loss, power and SINR maps.
+"""The radio map of a scenario (the paper's Section III, Eq. (16)-(19)): path-loss, power and SINR maps.
 
 All maps have shape ``(nx, ny)``, are indexed ``[ix, iy]`` and hold values at the cell centres at
 the robots' antenna height. Every link uses the expected Rayleigh fading
@@ -14,7 +14,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from noma_radiomap import geometry
-from noma_radiomap.propagation import EXPECTED_FADING_DB, dbm_to_watt, noise_power_dbm, path_loss_db, watt_to_dbm
+from noma_radiomap.downlink import in_outage, shannon_rate
+from noma_radiomap.propagation import (
+    EXPECTED_FADING_DB,
+    db_to_linear,
+    dbm_to_watt,
+    expected_channel_gain,
+    interference_power,
+    noise_power_dbm,
+    path_gain,
+    path_loss_db,
+    watt_to_dbm,
+)
 from noma_radiomap.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -28,18 +39,23 @@ class RadioMap:
 
     Attributes (arrays of shape ``(nx, ny)``, indexed ``[ix, iy]``):
 
-    - ``blocked``: cells that block motion (SPEC 2.2);
+    - ``blocked``: cells that block motion (docs/MODEL.md, geometry);
     - ``bottom``, ``top``: the paper's layout height matrices (:func:`~noma_radiomap.geometry.height_matrices`);
     - ``n_obstacles[name]``: distinct obstacles crossed from transmitter ``name`` (``"ap"`` or an
       interferer's name) to each cell;
-    - ``path_loss_db[name]``: path loss (SPEC 2.3) from each transmitter;
-    - ``gain_db[name]``: channel gain with the expected fading, ``-path_loss_db + EXPECTED_FADING_DB``;
+    - ``path_loss_db[name]``: path loss (paper Eq. (1)-(3)) from each transmitter;
+    - ``path_gain[name]``: linear path gain without fading, ``10^(-path_loss_db / 10)`` (the Rayleigh
+      channel multiplies it by ``|h|^2`` every step);
+    - ``gain[name]``: linear channel gain with the expected fading
+      (:func:`~noma_radiomap.propagation.expected_channel_gain`, paper Eq. (17)): the radio-map channel;
+    - ``gain_db[name]``: the same in dB, ``-path_loss_db + EXPECTED_FADING_DB``;
+    - ``interference_w``: total power received from all interferers in watts, on the radio-map channel
+      (:func:`~noma_radiomap.propagation.interference_power`);
     - ``power_map_dbm``: power received from the AP at full power ``P_max`` (paper Fig. 4a);
-    - ``interference_dbm``: total power received from all interferers (``-inf`` without interferers);
     - ``sinr_map_db``: single-robot SINR with the AP at full power and all interferers on (paper
-      Fig. 4b), with the corrected formula of SPEC 2.5:
-      ``SINR = P_AP g_AP / (sum_i P_i g_i + N0 W)``, ``W = U x B`` the NOMA cluster bandwidth over
-      which the interferers spread their power (SPEC 2.6) and the noise ``N0 W``.
+      Fig. 4b), ``SINR = P_AP g_AP / (sum_i P_i g_i + N0 W)``, ``W = U x B`` the NOMA cluster bandwidth
+      over which the interferers spread their power and the noise ``N0 W`` (docs/MODEL.md explains why
+      this replaces the paper's Eq. (19)).
 
     :param scenario: the scenario
     """
@@ -56,7 +72,7 @@ class RadioMap:
         self.blocked = geometry.occupancy_grid(boxes, room.width, room.depth, room.resolution, scenario.robot.body_height)
         self.bottom, self.top = geometry.height_matrices(boxes, room.width, room.depth, room.resolution)
         #: Cell centres, (nx, ny, 2).
-        self.centers = self.cell_center(*np.meshgrid(np.arange(self.nx), np.arange(self.ny), indexing="ij"))
+        self.centers = room.cell_center(*np.meshgrid(np.arange(self.nx), np.arange(self.ny), indexing="ij"))
         receivers = np.concatenate(
             [self.centers.reshape(-1, 2), np.full((self.nx * self.ny, 1), scenario.robot.antenna_height)], axis=1
         )
@@ -71,6 +87,8 @@ class RadioMap:
         self.n_obstacles: dict[str, np.ndarray] = {}
         self.path_loss_db: dict[str, np.ndarray] = {}
         self.gain_db: dict[str, np.ndarray] = {}
+        self.path_gain: dict[str, np.ndarray] = {}
+        self.gain: dict[str, np.ndarray] = {}
         for name, (position, _) in self.transmitters.items():
             counts = geometry.count_obstacles(position, receivers, self.boxes, self.box_owner)
             distance = np.linalg.norm(receivers - position, axis=1)
@@ -85,20 +103,21 @@ class RadioMap:
             self.n_obstacles[name] = counts.reshape(self.shape)
             self.path_loss_db[name] = loss.reshape(self.shape)
             self.gain_db[name] = -self.path_loss_db[name] + EXPECTED_FADING_DB
+            self.path_gain[name] = path_gain(self.path_loss_db[name])
+            self.gain[name] = expected_channel_gain(self.path_loss_db[name])
 
         #: Cluster bandwidth ``W = U x B`` (Hz) and the noise power over it (dBm).
         self.bandwidth_hz = scenario.n_robots * radio.bandwidth_per_robot_hz
         self.noise_dbm = float(noise_power_dbm(radio.noise_dbm_per_hz, self.bandwidth_hz))
         self.power_map_dbm = scenario.ap.max_power_dbm + self.gain_db["ap"]
-        interference_w = np.zeros(self.shape)
-        for interferer in scenario.interferers:
-            interference_w += dbm_to_watt(interferer.power_dbm + self.gain_db[interferer.name])
-        self.interference_w = interference_w
-        self.interference_dbm = watt_to_dbm(interference_w)
-        self.sinr_map_db = self.power_map_dbm - watt_to_dbm(interference_w + dbm_to_watt(self.noise_dbm))
+        names = [i.name for i in scenario.interferers]
+        interferer_gains = np.stack([self.gain[n] for n in names], axis=-1) if names else np.zeros((*self.shape, 0))
+        interferer_power_w = dbm_to_watt(np.array([i.power_dbm for i in scenario.interferers], dtype=np.float64))
+        self.interference_w = interference_power(interferer_gains, interferer_power_w)
+        self.sinr_map_db = self.power_map_dbm - watt_to_dbm(self.interference_w + dbm_to_watt(self.noise_dbm))
         for array in (self.blocked, self.bottom, self.top, self.power_map_dbm, self.sinr_map_db, self.interference_w):
             array.setflags(write=False)
-        for mapping in (self.n_obstacles, self.path_loss_db, self.gain_db):
+        for mapping in (self.n_obstacles, self.path_loss_db, self.gain_db, self.path_gain, self.gain):
             for array in mapping.values():
                 array.setflags(write=False)
 
@@ -123,20 +142,21 @@ class RadioMap:
 
         :return: float (nx, ny)
         """
-        return self.bandwidth_hz * np.log2(1.0 + np.power(10.0, self.sinr_map_db / 10.0))
+        return shannon_rate(db_to_linear(self.sinr_map_db), self.bandwidth_hz)
 
     def outage_map(self) -> np.ndarray:
         """
         Cells where a single robot given the whole AP power fails the QoS:
-        ``W log2(1 + SINR) < qos_rate_bps`` (SPEC 2.1, 2.6). Computed for every cell, blocked or not.
+        ``W log2(1 + SINR) < qos_rate_bps`` (:func:`~noma_radiomap.downlink.in_outage`). Computed for every
+        cell, blocked or not.
 
         :return: bool (nx, ny)
         """
-        return self.rate_map_bps() < self.scenario.radio.qos_rate_bps
+        return in_outage(self.rate_map_bps(), self.scenario.radio.qos_rate_bps)
 
     def outage_share(self) -> float:
         """
-        Fraction of the free cells in :meth:`outage_map` (SPEC 2.1 asks 15-60 % for ``mall``).
+        Fraction of the free cells in :meth:`outage_map` (docs/SCENARIOS.md: 15-60 % for ``mall``).
 
         :return: a number in [0, 1]
         """
@@ -148,32 +168,26 @@ class RadioMap:
 
     def cell_index(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """
-        Cell indices of positions: ``ix = floor(x / res)``, clipped to the grid.
+        Cell indices of positions (:meth:`Room.cell_index <noma_radiomap.scenario.Room.cell_index>`).
 
         :param xy: (..., 2) positions in metres
         :return: ``(ix, iy)``, int arrays of shape (...)
         """
-        return geometry.point_cell(xy, self.resolution, self.shape)
+        return self.scenario.room.cell_index(xy)
 
     def cell_center(self, ix: np.ndarray | int, iy: np.ndarray | int) -> np.ndarray:
         """
-        Centres of cells: ``((ix + 0.5) res, (iy + 0.5) res)``.
+        Centres of cells (:meth:`Room.cell_center <noma_radiomap.scenario.Room.cell_center>`).
 
         :param ix: cell index/indices along x
         :param iy: cell index/indices along y
         :return: (..., 2) positions in metres
         """
-        return np.stack(
-            [
-                (np.asarray(ix, dtype=np.float64) + 0.5) * self.resolution,
-                (np.asarray(iy, dtype=np.float64) + 0.5) * self.resolution,
-            ],
-            axis=-1,
-        )
+        return self.scenario.room.cell_center(ix, iy)
 
     def obstacles_crossed(self, tx_xyz: np.ndarray, rx_xyz: np.ndarray) -> int:
         """
-        Number of distinct obstacles the segment from ``tx_xyz`` to ``rx_xyz`` crosses (SPEC 2.2).
+        Number of distinct obstacles the segment from ``tx_xyz`` to ``rx_xyz`` crosses (paper Sec. III-C).
 
         :param tx_xyz: transmitter antenna position ``(x, y, z)``
         :param rx_xyz: receiver antenna position ``(x, y, z)``

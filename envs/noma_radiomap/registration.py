@@ -1,17 +1,23 @@
-"""Registration of the environment ids with Gymnasium (SPEC 2.10).
+"""Registration of the environment ids with Gymnasium (docs/ARCHITECTURE.md).
 
 :func:`register_envs` runs when :mod:`noma_radiomap` is imported and is idempotent, so importing the package
 again, or Gymnasium importing it for an id written ``"noma_radiomap:NomaRadioMap-v0"`` (e.g. in a
 ``SubprocVecEnv`` worker started with ``spawn``), is harmless.
+
+Episodes are truncated only by Gymnasium's ``TimeLimit``, at the scenario's ``mission.max_steps``: the entry
+point :func:`make_env` builds the env and wraps it in a ``TimeLimit`` of its own scenario's length, so
+``gymnasium.make("NomaRadioMap-v0", scenario="small").spec.max_episode_steps`` is ``small``'s 60 and the
+default ``mall`` gives 300. ``gymnasium.make(..., max_episode_steps=n)`` adds a shorter limit on top.
 """
 
+from typing import Any
+
 import gymnasium as gym
+from gymnasium.wrappers import TimeLimit
 
-ENTRY_POINT = "noma_radiomap.env:NomaRadioMapEnv"
+from noma_radiomap.env import NomaRadioMapEnv
 
-#: ``mission.max_steps`` of the default ``mall`` scenario: the ``TimeLimit`` of the registered ids (a test
-#: checks that they agree; the env also truncates at its own scenario's ``mission.max_steps``).
-MAX_EPISODE_STEPS = 300
+ENTRY_POINT = "noma_radiomap.registration:make_env"
 
 #: The registered ids and their default kwargs (any kwarg can still be overridden through ``gymnasium.make``).
 ENV_IDS: dict[str, dict[str, str]] = {
@@ -22,6 +28,22 @@ ENV_IDS: dict[str, dict[str, str]] = {
 }
 
 
+def make_env(**kwargs: Any) -> gym.Env:
+    """
+    The entry point of the registered ids: :class:`NomaRadioMapEnv` in a ``TimeLimit`` of its scenario's
+    ``mission.max_steps``.
+
+    :param kwargs: the arguments of :class:`NomaRadioMapEnv`
+    :return: the wrapped env
+    """
+    env = NomaRadioMapEnv(**kwargs)
+    return TimeLimit(env, max_episode_steps=env.max_steps)
+
+
+# gymnasium.make reads the creator's render modes from here, as it does from an env class
+make_env.metadata = NomaRadioMapEnv.metadata  # type: ignore[attr-defined]
+
+
 def register_envs() -> None:
     """Register every id of :data:`ENV_IDS` (``mall`` scenario, ``"destination"`` reward phase) once."""
     for env_id, kwargs in ENV_IDS.items():
@@ -30,6 +52,5 @@ def register_envs() -> None:
         gym.register(
             id=env_id,
             entry_point=ENTRY_POINT,
-            max_episode_steps=MAX_EPISODE_STEPS,
             kwargs={"scenario": "mall", "reward_phase": "destination", **kwargs},
         )

@@ -1,4 +1,4 @@
-"""Rendering of :class:`~noma_radiomap.env.NomaRadioMapEnv` (SPEC 2.10): the SINR map with the robots.
+"""Rendering of :class:`~noma_radiomap.env.NomaRadioMapEnv` (docs/ARCHITECTURE.md): the SINR map with the robots.
 
 matplotlib is imported here only, and this module only when an env renders for the first time.
 """

@@ -1,4 +1,4 @@
-"""Scenario files (SPEC 2.1): frozen dataclasses mirroring the YAML schema, loading and validation.
+"""Scenario files (docs/SCENARIOS.md): frozen dataclasses mirroring the YAML schema, loading and validation.
 
 A scenario is plain data: the room, the robots' body, the radio parameters, the AP, the external
 interferers, the obstacles (objects built from axis-aligned boxes, the paper's "Lego" bricks), the
@@ -11,6 +11,7 @@ raises a ``ValueError`` naming its path (e.g. ``obstacles[3].boxes[1]``) and the
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Mapping
@@ -23,6 +24,7 @@ import numpy as np
 import yaml
 
 from noma_radiomap import geometry
+from noma_radiomap.rewards import RewardConstants
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -32,31 +34,95 @@ Box = tuple[float, float, float, float, float, float]
 
 @dataclass(frozen=True)
 class Room:
-    """The room: ``x in [0, width]``, ``y in [0, depth]``, a grid of square cells of side ``resolution``."""
+    """
+    The room: ``x in [0, width]``, ``y in [0, depth]``, a grid of square cells of side ``resolution``.
+
+    The room owns the map from points to cells: cell ``(ix, iy)`` spans
+    ``[ix res, (ix + 1) res) x [iy res, (iy + 1) res)`` and grids are indexed ``[ix, iy]`` (flat index
+    ``ix * ny + iy``). The batched methods take points of shape ``(..., 2)``; :meth:`point_cell` is their
+    scalar fast path for one point (the motion model's sub-steps), tested equal to :meth:`cell_index`.
+    """
 
     width: float
     depth: float
     resolution: float
 
-    @property
+    @functools.cached_property
     def nx(self) -> int:
         """Number of cells along x."""
         return round(self.width / self.resolution)
 
-    @property
+    @functools.cached_property
     def ny(self) -> int:
         """Number of cells along y."""
         return round(self.depth / self.resolution)
 
-    @property
+    @functools.cached_property
     def shape(self) -> tuple[int, int]:
         """Grid shape ``(nx, ny)``; grids are indexed ``[ix, iy]``."""
         return (self.nx, self.ny)
 
     @property
-    def diagonal(self) -> float:
-        """Length of the room's diagonal in metres (the ``d_max`` of the inducing reward)."""
-        return math.hypot(self.width, self.depth)
+    def d_max(self) -> float:
+        """The room's diagonal in metres: ``d_max`` of the inducing reward ``R_i = 1 - d / d_max`` (paper Sec. IV-E)."""
+        return float(np.hypot(self.width, self.depth))
+
+    def cell_index(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Cells of points: ``ix = floor(x / res)``, ``iy = floor(y / res)``, clipped to the grid.
+
+        :param xy: points in metres, shape (..., 2)
+        :return: ``(ix, iy)``, int arrays of shape (...)
+        """
+        return geometry.point_cell(xy, self.resolution, self.shape)
+
+    def flat_cell_index(self, xy: np.ndarray) -> np.ndarray:
+        """
+        Flat cell indices ``ix * ny + iy`` of points (rows of per-cell tables, ``grid.flat[...]``).
+
+        :param xy: points in metres, shape (..., 2)
+        :return: int array of shape (...)
+        """
+        ix, iy = self.cell_index(xy)
+        return ix * self.ny + iy
+
+    def point_cell(self, x: float, y: float) -> tuple[int, int]:
+        """
+        The cell of one point of the room (``x, y >= 0``) on Python floats: :meth:`cell_index` without numpy.
+
+        :param x: x in metres
+        :param y: y in metres
+        :return: ``(ix, iy)``
+        """
+        nx, ny = self.shape
+        return min(int(x / self.resolution), nx - 1), min(int(y / self.resolution), ny - 1)
+
+    def cell_center(self, ix: np.ndarray | int, iy: np.ndarray | int) -> np.ndarray:
+        """
+        Centres of cells: ``((ix + 0.5) res, (iy + 0.5) res)``.
+
+        :param ix: cell index/indices along x
+        :param iy: cell index/indices along y
+        :return: positions in metres, shape (..., 2)
+        """
+        return np.stack(
+            [
+                (np.asarray(ix, dtype=np.float64) + 0.5) * self.resolution,
+                (np.asarray(iy, dtype=np.float64) + 0.5) * self.resolution,
+            ],
+            axis=-1,
+        )
+
+    def contains(self, xy: np.ndarray) -> np.ndarray:
+        """
+        Whether points lie in the room ``[0, width) x [0, depth)``.
+
+        :param xy: points in metres, shape (..., 2)
+        :return: bool array of shape (...)
+        """
+        xy = np.asarray(xy, dtype=np.float64)
+        x, y = xy[..., 0], xy[..., 1]
+        return (x >= 0.0) & (x < self.width) & (y >= 0.0) & (y < self.depth)
 
 
 @dataclass(frozen=True)
@@ -71,7 +137,7 @@ class RobotSpec:
 
 @dataclass(frozen=True)
 class Radio:
-    """Radio parameters: path-loss constants (SPEC 2.3), noise, bandwidth and QoS (SPEC 2.6)."""
+    """Radio parameters: path-loss constants (paper Eq. (1)-(3)), noise, bandwidth and QoS (Eq. (12)-(13))."""
 
     frequency_mhz: float
     nlos_distance_coefficient: float
@@ -101,7 +167,7 @@ class Interferer:
 
 @dataclass(frozen=True)
 class Obstacle:
-    """One object made of one or more boxes; occlusion counts objects, not boxes (SPEC 2.2)."""
+    """One object made of one or more boxes; occlusion counts objects, not boxes (paper Sec. III-C)."""
 
     name: str
     boxes: tuple[Box, ...]
@@ -117,18 +183,25 @@ class RobotMission:
 
 @dataclass(frozen=True)
 class Mission:
-    """Mission constants: MQI budget ``t_total``, outage penalty ``lambda``, step limit and step length (s)."""
+    """
+    Mission constants: MQI budget ``t_total``, outage penalty ``lambda``, step limit and step length (s), and the
+    reward constants (defaults: the paper's, Sec. IV-E): time cost ``R_c``, arrival reward ``R_d`` and success
+    reward ``R_s``.
+    """
 
     t_total: float
     outage_penalty: float
     max_steps: int
     time_step: float
+    time_cost: float = RewardConstants.time_cost
+    arrival_reward: float = RewardConstants.arrival_reward
+    success_reward: float = RewardConstants.success_reward
 
 
 @dataclass(frozen=True)
 class Scenario:
     """
-    A complete scenario (SPEC 2.1). Build it with :func:`load_scenario` (a built-in name or a YAML
+    A complete scenario (docs/SCENARIOS.md). Build it with :func:`load_scenario` (a built-in name or a YAML
     path) or :meth:`Scenario.from_dict` (validated); :meth:`to_dict` gives the YAML mapping back.
 
     :param name: scenario name
@@ -178,7 +251,7 @@ class Scenario:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str | None = None) -> Scenario:
         """
-        Build and validate a scenario from a mapping with the keys of SPEC 2.1.
+        Build and validate a scenario from a mapping with the keys of docs/SCENARIOS.md.
 
         :param data: the scenario mapping (as loaded from YAML)
         :param source: where it came from, used in error messages
@@ -339,12 +412,15 @@ def _parse_simple(cls: type, data: Any, path: str, positive: tuple[str, ...], no
 
 
 def _parse_mission(data: Any) -> Mission:
-    d = _mapping(data, "mission", ("t_total", "outage_penalty", "max_steps", "time_step"))
+    reward_keys = ("time_cost", "arrival_reward", "success_reward")
+    d = _mapping(data, "mission", ("t_total", "outage_penalty", "max_steps", "time_step"), reward_keys)
+    defaults = {name: Mission.__dataclass_fields__[name].default for name in reward_keys}
     return Mission(
         t_total=_number(d["t_total"], "mission.t_total", positive=True),
         outage_penalty=_number(d["outage_penalty"], "mission.outage_penalty", nonnegative=True),
         max_steps=_integer(d["max_steps"], "mission.max_steps", positive=True),
         time_step=_number(d["time_step"], "mission.time_step", positive=True),
+        **{name: _number(d.get(name, defaults[name]), f"mission.{name}") for name in reward_keys},
     )
 
 
@@ -452,7 +528,7 @@ def _check_layout(scenario: Scenario) -> None:
         start_labels = np.unique(components[free[:, 0], free[:, 1]])
         for j, destination in enumerate(robot.destinations):
             path = f"robots[{u}].destinations[{j}]"
-            ix, iy = geometry.point_cell(np.asarray(destination), room.resolution, blocked.shape)
+            ix, iy = room.cell_index(np.asarray(destination))
             if blocked[ix, iy]:
                 raise ValueError(f"{path}: {list(destination)} lies in a blocked cell ({int(ix)}, {int(iy)})")
             if len(start_labels) > 1 or components[ix, iy] != start_labels[0]:

@@ -8,9 +8,6 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
 
-#: Reward components of ``noma_radiomap`` (SPEC 2.9), in the order they are stored.
-REWARD_COMPONENTS: tuple[str, ...] = ("time", "inducing", "qos", "arrival", "success")
-
 
 class RewardComponentsReplayBuffer(ReplayBuffer):
     """
@@ -30,7 +27,8 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
     :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer (see SB3's ``ReplayBuffer``)
     :param handle_timeout_termination: Handle timeout termination (due to timelimit) separately and treat the task
         as infinite horizon task (see SB3's ``ReplayBuffer``)
-    :param component_keys: Names of the reward components, the keys every ``info["reward_components"]`` must have
+    :param component_keys: Names of the reward components, the keys every ``info["reward_components"]`` must have;
+        None: the keys of the first stored ``info["reward_components"]``, in their order
     :param kwargs: Further arguments of the parent buffer class (``n_steps`` and ``gamma`` of
         :class:`RewardComponentsNStepReplayBuffer`)
     """
@@ -46,7 +44,7 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
         n_envs: int = 1,
         optimize_memory_usage: bool = False,
         handle_timeout_termination: bool = True,
-        component_keys: Sequence[str] = REWARD_COMPONENTS,
+        component_keys: Sequence[str] | None = None,
         **kwargs: Any,
     ):
         super().__init__(
@@ -59,6 +57,12 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
             handle_timeout_termination=handle_timeout_termination,
             **kwargs,
         )
+        self.component_keys: tuple[str, ...] | None = None
+        self.reward_components = np.zeros((self.buffer_size, self.n_envs, 0), dtype=np.float64)
+        if component_keys is not None:
+            self._set_component_keys(component_keys)
+
+    def _set_component_keys(self, component_keys: Sequence[str]) -> None:
         component_keys = tuple(component_keys)
         if not component_keys or len(set(component_keys)) != len(component_keys):
             raise ValueError(f"component_keys must be non-empty and unique, got {component_keys!r}")
@@ -69,6 +73,15 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
     def _components_from_infos(self, infos: list[dict[str, Any]]) -> np.ndarray:
         if len(infos) != self.n_envs:
             raise ValueError(f"expected {self.n_envs} infos (one per env), got {len(infos)}")
+        if self.component_keys is None:
+            first = infos[0].get("reward_components")
+            if not isinstance(first, Mapping):
+                raise ValueError(
+                    f"{type(self).__name__} needs info['reward_components'] (a dict of floats) from every step; "
+                    f"env 0 gave {first!r}"
+                )
+            self._set_component_keys(list(first))
+        assert self.component_keys is not None
         components = np.empty((self.n_envs, len(self.component_keys)), dtype=np.float64)
         for env_idx, info in enumerate(infos):
             values = info.get("reward_components")
@@ -106,6 +119,8 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
 
         :param weights: Weight per component (e.g. ``env.reward_weights(phase)``); components not given weigh 0.
         """
+        if self.component_keys is None:  # nothing stored yet
+            return
         unknown = sorted(set(weights) - set(self.component_keys))
         if unknown:
             raise ValueError(

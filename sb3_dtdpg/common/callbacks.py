@@ -1,18 +1,16 @@
-"""Callbacks of DT-DPG: the curriculum transfer between reward phases and the mission logger."""
+"""The curriculum transfer of DT-DPG between reward phases (any env with ``set_reward_phase``)."""
 
 import os
 import re
 import uuid
 import warnings
-from collections import deque
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.noise import VectorizedActionNoise
 
-from sb3_dtdpg.common.noise import LinearDecayOUNoise, noise_sigma, rearm_noise
+from sb3_dtdpg.common.noise import decaying_noise, noise_sigma, rearm_noise
 from sb3_dtdpg.common.phases import Phase, parse_phases
 
 
@@ -28,10 +26,8 @@ class CurriculumTransferCallback(BaseCallback):
 
     1. the finished phase's model (theta_X of Algorithm 1) is saved atomically to
        ``<save_path>/phase_<k>_<name>.zip`` (a temporary file in the same folder, then ``os.replace``);
-    2. the networks carry over unchanged, or, with ``reinitialize_networks=True`` (ablation), are re-created
-       from scratch with fresh optimizers: ``model._setup_model()`` is re-run with the model's seed withheld so
-       that it does not re-seed the global RNGs (which would replay their streams); it keeps the replay buffer
-       and rebuilds the policy, its optimizers and the algorithm's aliases (``actor``, ``critic_target``, ...);
+    2. the networks carry over unchanged, or, with ``reinitialize_at_transfer=True`` (ablation), are re-created
+       from scratch with fresh optimizers by the model's ``reinitialize()`` (:meth:`sb3_dtdpg.DTDPG.reinitialize`);
     3. the env switches reward phase (``env_method("set_reward_phase", name)``), from the next step on;
     4. the action noise re-arms with the new phase's schedule (:func:`sb3_dtdpg.common.noise.rearm_noise`);
        the episode that just ended does not count in the new schedule;
@@ -60,7 +56,8 @@ class CurriculumTransferCallback(BaseCallback):
 
     :param phases: The phases in training order (:class:`sb3_dtdpg.common.phases.Phase` or dicts of their fields).
     :param save_path: Folder for the per-phase checkpoints (None: no checkpoints).
-    :param reinitialize_networks: Ablation: re-initialise the networks at each transfer instead of carrying them over.
+    :param reinitialize_at_transfer: Ablation: re-initialise the networks at each transfer instead of carrying them
+        over (needs a model with ``reinitialize()``, e.g. :class:`sb3_dtdpg.DTDPG`).
     :param verbose: Verbosity level: 0 no output, 1 a line per transfer.
     """
 
@@ -68,13 +65,13 @@ class CurriculumTransferCallback(BaseCallback):
         self,
         phases: Sequence[Phase | Mapping[str, Any]],
         save_path: str | os.PathLike[str] | None = None,
-        reinitialize_networks: bool = False,
+        reinitialize_at_transfer: bool = False,
         verbose: int = 0,
     ):
         super().__init__(verbose=verbose)
         self.phases = parse_phases(phases)
         self.save_path = None if save_path is None else os.fspath(save_path)
-        self.reinitialize_networks = reinitialize_networks
+        self.reinitialize_at_transfer = reinitialize_at_transfer
         self._pending_replay: Phase | None = None
         self._stop = False
 
@@ -225,8 +222,8 @@ class CurriculumTransferCallback(BaseCallback):
         phase = self.phases[index]
         self.state.update(phase_index=index, episodes_in_phase=0, timesteps_in_phase=0, recent_successes=[], finished=False)
         self.state["history"].append(self._new_history_entry(index))
-        if self.reinitialize_networks:
-            self._reinitialize_policy()
+        if self.reinitialize_at_transfer:
+            self.model.reinitialize()  # type: ignore[attr-defined]
         self._set_env_phase(phase)
         self._arm_noise(phase)
         if phase.replay_handling == "clear":
@@ -241,19 +238,8 @@ class CurriculumTransferCallback(BaseCallback):
             print(
                 f"Curriculum: entering phase {index} {phase.name!r} (reward phase {phase.reward_phase!r}, "
                 f"noise sigma {phase.sigma}, replay buffer: {phase.replay_handling}"
-                + (", networks re-initialised)" if self.reinitialize_networks else ", networks carried over)")
+                + (", networks re-initialised)" if self.reinitialize_at_transfer else ", networks carried over)")
             )
-
-    def _reinitialize_policy(self) -> None:
-        model = self.model
-        seed = model.seed
-        model.seed = None  # _setup_model() calls set_random_seed(self.seed), a no-op for None
-        try:
-            model._setup_model()
-        finally:
-            model.seed = seed
-        # We may be in the middle of a rollout, which SB3 collects in eval mode (batch norm with a batch of one)
-        model.policy.set_training_mode(False)
 
     def _apply_pending_replay(self) -> None:
         phase, self._pending_replay = self._pending_replay, None
@@ -274,11 +260,9 @@ class CurriculumTransferCallback(BaseCallback):
             return
         sigma, final_sigma, decay_episodes = schedule
         if self.model.action_noise is None:
-            n_actions = int(np.prod(self.model.action_space.shape))
-            noise: Any = LinearDecayOUNoise(np.zeros(n_actions), sigma, final_sigma, decay_episodes)
-            if self.training_env.num_envs > 1:
-                noise = VectorizedActionNoise(noise, self.training_env.num_envs)
-            self.model.action_noise = noise
+            self.model.action_noise = decaying_noise(
+                self.model.action_space.shape, sigma, final_sigma, decay_episodes, n_envs=self.training_env.num_envs
+            )
         else:
             rearm_noise(self.model.action_noise, sigma, final_sigma, decay_episodes)
 
@@ -307,6 +291,11 @@ class CurriculumTransferCallback(BaseCallback):
     # ------------------------------------------------------------------ checks
     def _check_setup(self) -> None:
         env = self.training_env
+        if self.reinitialize_at_transfer and not callable(getattr(self.model, "reinitialize", None)):
+            raise ValueError(
+                "reinitialize_at_transfer=True needs a model with reinitialize() (e.g. DTDPG), "
+                f"got {type(self.model).__name__}"
+            )
         reward_phases = sorted({phase.reward_phase for phase in self.phases if phase.reward_phase is not None})
         if reward_phases:
             if not env.has_attr("set_reward_phase"):
@@ -332,44 +321,3 @@ class CurriculumTransferCallback(BaseCallback):
                 )
             if not env.has_attr("reward_weights"):
                 raise ValueError(f"phase {phase.name!r} has replay_handling='relabel', which needs env.reward_weights()")
-
-
-class MissionLoggerCallback(BaseCallback):
-    """
-    Log the mission figures of finished episodes from the env's ``info`` under ``mission/``:
-    ``success_rate`` (over the last ``stats_window_size`` episodes, from ``is_success``), and the means over the
-    episodes since the last log dump of ``mqi``, ``outage_steps`` (summed over robots) and ``mission_time``
-    (the largest over robots: steps until the last robot arrived, ``max_steps`` if one never did).
-    Keys absent from an env's infos are skipped.
-
-    :param stats_window_size: Window of the success rate (None: the model's ``stats_window_size``).
-    :param verbose: Verbosity level.
-    """
-
-    def __init__(self, stats_window_size: int | None = None, verbose: int = 0):
-        super().__init__(verbose=verbose)
-        if stats_window_size is not None and (isinstance(stats_window_size, bool) or stats_window_size < 1):
-            raise ValueError(f"stats_window_size must be a positive integer or None, got {stats_window_size!r}")
-        self.stats_window_size = stats_window_size
-        self.successes: deque[bool] = deque(maxlen=stats_window_size or 100)
-
-    def _init_callback(self) -> None:
-        window = self.stats_window_size or getattr(self.model, "_stats_window_size", 100)
-        if self.successes.maxlen != window:
-            self.successes = deque(self.successes, maxlen=window)
-
-    def _on_step(self) -> bool:
-        for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
-            if not done:
-                continue
-            if "is_success" in info:
-                self.successes.append(bool(info["is_success"]))
-                self.logger.record("mission/success_rate", float(np.mean(self.successes)))
-            if "mqi" in info:
-                self.logger.record_mean("mission/mqi", float(info["mqi"]))
-            if "outage_steps" in info:
-                self.logger.record_mean("mission/outage_steps", float(np.sum(info["outage_steps"])))
-            if "mission_time" in info:
-                # Per robot (SPEC 2.9): the squad's mission time is the last arrival.
-                self.logger.record_mean("mission/mission_time", float(np.max(info["mission_time"])))
-        return True

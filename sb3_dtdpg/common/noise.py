@@ -184,6 +184,28 @@ class LinearDecayOUNoise(OrnsteinUhlenbeckActionNoise):
         )
 
 
+def decaying_noise(
+    action_shape: tuple[int, ...],
+    sigma: float | np.ndarray,
+    final_sigma: float | np.ndarray,
+    decay_episodes: int,
+    n_envs: int = 1,
+) -> ActionNoise:
+    """
+    DT-DPG's exploration noise: a zero-mean :class:`LinearDecayOUNoise`, one per env (SB3's
+    ``VectorizedActionNoise``) when ``n_envs > 1``.
+
+    :param action_shape: the action space's shape
+    :param sigma: initial scale
+    :param final_sigma: scale reached after ``decay_episodes`` episodes
+    :param decay_episodes: length of the linear decay in episodes
+    :param n_envs: number of envs the noise serves
+    :return: the noise
+    """
+    noise = LinearDecayOUNoise(np.zeros(action_shape, dtype=np.float32), sigma, final_sigma, decay_episodes)
+    return VectorizedActionNoise(noise, n_envs) if n_envs > 1 else noise
+
+
 def _noises(action_noise: ActionNoise) -> list[ActionNoise]:
     if isinstance(action_noise, VectorizedActionNoise):
         return [action_noise.base_noise, *action_noise.noises]

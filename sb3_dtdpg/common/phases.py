@@ -1,4 +1,4 @@
-"""Training phases of DT-DPG's curriculum transfer (Algorithm 1 of the paper, SPEC 3.4)."""
+"""Training phases of DT-DPG's curriculum transfer (Algorithm 1 of the paper; docs/ARCHITECTURE.md)."""
 
 import dataclasses
 import math
@@ -171,43 +171,6 @@ def parse_phases(phases: Iterable[Phase | Mapping[str, Any]]) -> list[Phase]:
     for phase in parsed:
         phase.noise_schedule()  # raises on an incomplete decay schedule
     return parsed
-
-
-def default_phases(
-    destination_episodes: int = 300,
-    success_threshold: float | None = 0.95,
-    success_window: int = 20,
-    replay_handling: ReplayHandling = "relabel",
-) -> list[Phase]:
-    """
-    The paper's two phases (Section IV-D): destination training, then MQI training.
-
-    OU noise scales are the paper's (0.5 then 0.4, Table I / Section V). The paper gives no final scale;
-    we decay linearly to 0.1 and 0.05. Phase 1 ends after ``destination_episodes`` episodes, or earlier
-    once the robots reach their destinations in ``success_threshold`` of the last ``success_window``
-    episodes. Phase 2 lasts until ``learn()`` ends.
-
-    :param destination_episodes: Episode budget of the destination phase.
-    :param success_threshold: Early-transfer threshold of the destination phase (``None``: off).
-    :param success_window: Window K of the early-transfer rule.
-    :param replay_handling: Replay handling when entering the MQI phase. ``"relabel"`` (the default) trained
-        best in ``benchmarks/learning.py`` (docs/BENCHMARKS.md: mean test MQI over 3 seeds 657 vs 602 for
-        ``"keep"`` and 445 for ``"clear"``); it needs an env with ``reward_weights`` and reward components.
-    :return: The two phases.
-    """
-    return parse_phases(
-        [
-            Phase(
-                "destination",
-                n_episodes=destination_episodes,
-                sigma=0.5,
-                final_sigma=0.1,
-                success_threshold=success_threshold,
-                success_window=success_window,
-            ),
-            Phase("mqi", sigma=0.4, final_sigma=0.05, decay_episodes=300, replay_handling=replay_handling),
-        ]
-    )
 
 
 def single_phase(

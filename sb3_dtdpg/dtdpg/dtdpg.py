@@ -3,7 +3,6 @@ import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
-import numpy as np
 import torch as th
 from stable_baselines3 import DDPG
 from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
@@ -13,10 +12,11 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_dtdpg.common.buffers import reward_components_buffer
-from sb3_dtdpg.common.callbacks import CurriculumTransferCallback, MissionLoggerCallback
-from sb3_dtdpg.common.noise import LinearDecayOUNoise
-from sb3_dtdpg.common.phases import Phase, default_phases, parse_phases, single_phase
+from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
+from sb3_dtdpg.common.noise import decaying_noise
+from sb3_dtdpg.common.phases import Phase, parse_phases
 from sb3_dtdpg.dtdpg.policies import DTDPGPolicy, MlpPolicy
+from sb3_dtdpg.missions import MissionLoggerCallback, default_curriculum
 
 SelfDTDPG = TypeVar("SelfDTDPG", bound="DTDPG")
 
@@ -81,13 +81,13 @@ class DTDPG(DDPG):
     :param device: Device (cpu, cuda, ...) on which the code should be run.
         Setting it to auto, the code will be run on the GPU if possible.
     :param phases: The curriculum: :class:`~sb3_dtdpg.common.phases.Phase` objects or dicts of their fields
-        (YAML). None: the paper's two phases ("destination" then "mqi") on an env with reward phases
-        (``set_reward_phase``), the stored rewards relabelled at the transfer when the env has ``reward_weights``
-        (kept otherwise), else a single phase that leaves the reward alone.
+        (YAML). None: :func:`sb3_dtdpg.missions.default_curriculum`, the paper's two phases on an env with
+        reward phases (``set_reward_phase``), the stored rewards relabelled at the transfer when the env has
+        ``reward_weights`` (kept otherwise), else a single phase that leaves the reward alone.
     :param curriculum_save_path: Folder where the model is saved at the end of each phase
         (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved
     :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
-        them over (ablation of the transfer)
+        them over (ablation of the transfer, :meth:`reinitialize`)
     :param _init_setup_model: Whether or not to build the network at the creation of the instance
     """
 
@@ -151,20 +151,14 @@ class DTDPG(DDPG):
         if phases is not None:
             self.phases = parse_phases(phases)
         else:
-            if self.env is not None and self.env.has_attr("set_reward_phase"):
-                # Relabelling (the measured best) needs the env's reward weights; without them the buffer is kept
-                relabel = self.env.has_attr("reward_weights")
-                self.phases = default_phases(replay_handling="relabel" if relabel else "keep")
-            else:
-                self.phases = single_phase(sigma=0.5, final_sigma=0.1, decay_episodes=300)
+            self.phases = default_curriculum(self.env)
             if action_noise is not None:  # the user's noise is used as is: the default phases leave it alone
                 self.phases = [dataclasses.replace(p, sigma=None, final_sigma=None, decay_episodes=None) for p in self.phases]
 
         schedule = self.phases[0].noise_schedule()
         # No env when load() builds the model: the saved action noise is restored afterwards
         if self.action_noise is None and schedule is not None and self.env is not None:
-            mean = np.zeros(self.action_space.shape, dtype=np.float32)
-            self.action_noise = LinearDecayOUNoise(mean, *schedule)
+            self.action_noise = decaying_noise(self.action_space.shape, *schedule)
         if self.replay_buffer_class is None and any(phase.replay_handling == "relabel" for phase in self.phases[1:]):
             self.replay_buffer_class, buffer_kwargs = reward_components_buffer(self.n_steps, self.gamma)
             self.replay_buffer_kwargs = {**buffer_kwargs, **self.replay_buffer_kwargs}
@@ -187,6 +181,22 @@ class DTDPG(DDPG):
                 warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored", category=UserWarning)
             super()._setup_model()
 
+    def reinitialize(self) -> None:
+        """
+        Re-create the networks (actor, critic and their targets) from scratch, with fresh optimisers: the
+        ablation of the transfer (``reinitialize_at_transfer=True``).
+
+        The replay buffer, the action noise, the counters and the curriculum state are kept. The global random
+        generators are not re-seeded (re-seeding would replay their streams): the new weights are drawn from
+        where the streams are. The policy is left in evaluation mode, the mode SB3 collects rollouts in.
+        """
+        seed, self.seed = self.seed, None  # _setup_model() calls set_random_seed(self.seed), a no-op for None
+        try:
+            self._setup_model()
+        finally:
+            self.seed = seed
+        self.policy.set_training_mode(False)
+
     def learn(
         self: SelfDTDPG,
         total_timesteps: int,
@@ -199,7 +209,7 @@ class DTDPG(DDPG):
         curriculum = CurriculumTransferCallback(
             self.phases,
             save_path=self.curriculum_save_path,
-            reinitialize_networks=self.reinitialize_at_transfer,
+            reinitialize_at_transfer=self.reinitialize_at_transfer,
             verbose=self.verbose,
         )
         callbacks: list[BaseCallback] = [curriculum, MissionLoggerCallback()]

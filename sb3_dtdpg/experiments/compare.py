@@ -15,7 +15,7 @@ from typing import Any
 
 import pandas as pd
 
-from sb3_dtdpg.experiments.runs import BUDGETS, Budget, RunSpec, load_result, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, run_many
 
 __all__ = ["compare_specs", "evaluate_planners", "run_compare"]
 
@@ -120,7 +120,7 @@ def run_compare(
     from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
     from sb3_dtdpg.experiments import plots, tables
 
-    budget = _budget(budget)
+    budget = get_budget(budget)
     if scenario is not None:
         budget = dataclasses.replace(budget, scenario=scenario)
     unknown = [a for a in algos if a not in ALGORITHMS]
@@ -194,11 +194,3 @@ def run_compare(
             f"{len(report.skipped)} already done)"
         )
     return summary
-
-
-def _budget(budget: str | Budget) -> Budget:
-    if isinstance(budget, Budget):
-        return budget
-    if budget not in BUDGETS:
-        raise ValueError(f"budget must be one of {sorted(k for k in BUDGETS if not k.startswith('_'))}, got {budget!r}")
-    return BUDGETS[budget]

@@ -1,4 +1,4 @@
-"""``sb3-dtdpg reproduce``: every experiment of the paper's Section V (SPEC section 5), resumable.
+"""``sb3-dtdpg reproduce``: every experiment of the paper's Section V (docs/RESULTS.md), resumable.
 
 Runs (per seed; ``E`` and ``L`` are the budget's ``episodes`` and ``long_episodes``, 500 and 700 in the paper):
 
@@ -25,8 +25,9 @@ import pandas as pd
 
 from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.evaluation import mean_ci
-from sb3_dtdpg.experiments.compare import _budget, evaluate_planners
-from sb3_dtdpg.experiments.runs import Budget, RunSpec, load_result, run_many
+from sb3_dtdpg.experiments import tables
+from sb3_dtdpg.experiments.compare import evaluate_planners
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, run_many
 
 __all__ = ["LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
 
@@ -162,7 +163,7 @@ def run_reproduce(
     """
     from sb3_dtdpg.experiments import tables
 
-    budget = _budget(budget)
+    budget = get_budget(budget)
     seeds = budget.seeds if seeds is None else seeds
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")
@@ -251,7 +252,7 @@ def _figures(
         groups: dict[str, list[Path]] = {}
         for spec in experiments[name]:
             if results[spec.run_id] is not None and all(getattr(spec, k) == v for k, v in match.items()):
-                label = f"{spec.algo.upper().replace('DTDPG', 'DT-DPG')} {spec.multiple_access.upper()}"
+                label = f"{tables.ALGO_LABELS[spec.algo]} {spec.multiple_access.upper()}"
                 label += f" lr={spec.learning_rate or base_lr:g}" if name == "learning_rates" else ""
                 groups.setdefault(label, []).append(out / "tb" / spec.run_id)
         return groups

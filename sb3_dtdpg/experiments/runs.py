@@ -24,7 +24,18 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-__all__ = ["BUDGETS", "Budget", "RunReport", "RunSpec", "load_result", "result_path", "run_many", "run_one"]
+__all__ = [
+    "BUDGETS",
+    "PUBLIC_BUDGETS",
+    "Budget",
+    "RunReport",
+    "RunSpec",
+    "get_budget",
+    "load_result",
+    "result_path",
+    "run_many",
+    "run_one",
+]
 
 
 @dataclass(frozen=True)
@@ -60,6 +71,23 @@ BUDGETS: dict[str, Budget] = {
     "small": Budget("small", episodes=200, long_episodes=280, eval_episodes=20, seeds=3),
     "paper": Budget("paper", episodes=500, long_episodes=700, eval_episodes=20, seeds=5),
 }
+
+
+#: The budgets a user picks by name (``_micro`` is for the tests).
+PUBLIC_BUDGETS: tuple[str, ...] = tuple(name for name in BUDGETS if not name.startswith("_"))
+
+
+def get_budget(budget: str | Budget) -> Budget:
+    """
+    :param budget: a name of :data:`BUDGETS` or a :class:`Budget`
+    :return: the budget
+    :raises ValueError: naming the known budgets when the name is unknown
+    """
+    if isinstance(budget, Budget):
+        return budget
+    if budget not in BUDGETS:
+        raise ValueError(f"budget must be one of {', '.join(PUBLIC_BUDGETS)}, got {budget!r}")
+    return BUDGETS[budget]
 
 
 @dataclass(frozen=True)

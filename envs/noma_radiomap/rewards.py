@@ -1,0 +1,136 @@
+"""The reward of the mission env and the mission quality indicator (paper Sec. II-D and IV-E; docs/MODEL.md).
+
+Pure numpy functions whose leading axes are free: per-robot arrays have shape (..., U), so one mission
+``(U,)`` and a batch of N missions ``(N, U)`` go through the same code. Sums over robots run left to
+right (:func:`~noma_radiomap.propagation.sequential_sum`), so a batch gives the same bits as its missions
+one by one.
+
+The reward is a weighted sum of named components, each summed over the robots that had not arrived
+before the step: ``time`` (``R_c``), ``inducing`` (``R_i``), ``qos`` (``R_QoS``), ``arrival`` (``R_d``)
+and ``success`` (``R_s``). A reward phase picks the components (weights 0 or 1, :func:`phase_weights`).
+"""
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from noma_radiomap.propagation import sequential_sum
+
+#: The reward phases: the paper's destination training (Eq. (26)), its MQI training (Eq. (27)) and all five
+#: components at once (the plain DDPG baseline).
+REWARD_PHASES: tuple[str, ...] = ("destination", "mqi", "combined")
+#: The reward components, in the order they are summed and stored.
+REWARD_COMPONENTS: tuple[str, ...] = ("time", "inducing", "qos", "arrival", "success")
+PHASE_TERMS: dict[str, tuple[str, ...]] = {
+    "destination": ("time", "inducing", "arrival", "success"),
+    "mqi": ("time", "qos", "arrival", "success"),
+    "combined": REWARD_COMPONENTS,
+}
+
+
+@dataclass(frozen=True)
+class RewardConstants:
+    """
+    Constants of the reward (paper Sec. IV-E; the scenario's ``mission`` section).
+
+    :param time_cost: ``R_c``, per robot still on its way, per step
+    :param outage_penalty: ``lambda``: ``R_QoS = -lambda`` per robot in outage, per step
+    :param arrival_reward: ``R_d``, once per robot, on the step it arrives
+    :param success_reward: ``R_s``, once, on the step the last robot arrives
+    """
+
+    time_cost: float = -1.0
+    outage_penalty: float = 1.0
+    arrival_reward: float = 10.0
+    success_reward: float = 200.0
+
+
+def phase_weights(phase: str) -> dict[str, float]:
+    """
+    Weights of the reward components in a reward phase: the phase's reward is
+    ``sum(weights[k] * components[k])``.
+
+    :param phase: one of :data:`REWARD_PHASES`
+    :return: a weight (0 or 1) for each of :data:`REWARD_COMPONENTS`
+    """
+    if phase not in PHASE_TERMS:
+        raise ValueError(f"reward_phase must be one of {REWARD_PHASES}, got {phase!r}")
+    terms = PHASE_TERMS[phase]
+    return {name: float(name in terms) for name in REWARD_COMPONENTS}
+
+
+def inducing_reward(distance: np.ndarray, d_max: float) -> np.ndarray:
+    """
+    Inducing reward ``R_i = 1 - d / d_max`` (paper Sec. IV-E, destination training).
+
+    :param distance: distances ``d`` of the robots to their destinations in metres, shape (..., U)
+    :param d_max: the largest possible distance (the room's diagonal, :attr:`Room.d_max`)
+    :return: ``R_i``, shape (..., U)
+    """
+    return 1.0 - np.asarray(distance) / d_max
+
+
+def reward_components(
+    active: np.ndarray,
+    arriving: np.ndarray,
+    outage: np.ndarray,
+    distance: np.ndarray,
+    d_max: float,
+    constants: RewardConstants,
+) -> dict[str, np.ndarray]:
+    """
+    The reward components of one step, summed over the robots that had not arrived before it.
+
+    ``success`` is paid once, on the step the last robot arrives (all robots have arrived and one of them
+    arrived on this step).
+
+    :param active: robots that had not arrived before the step, bool (..., U)
+    :param arriving: robots that arrived on this step, bool (..., U)
+    :param outage: robots in outage (only active ones count), bool (..., U)
+    :param distance: distances to the destinations after the step in metres, (..., U)
+    :param d_max: see :func:`inducing_reward`
+    :param constants: the reward constants
+    :return: ``{component: value}`` for each of :data:`REWARD_COMPONENTS`, arrays of shape (...)
+    """
+    active, arriving, outage = np.asarray(active, dtype=bool), np.asarray(arriving, dtype=bool), np.asarray(outage, dtype=bool)
+    n_active, n_arriving = active.sum(axis=-1), arriving.sum(axis=-1)
+    n_outage = (outage & active).sum(axis=-1)
+    # Everyone has arrived: the active robots of this step are exactly the arriving ones.
+    all_arrived = (arriving | ~active).all(axis=-1)
+    return {
+        "time": constants.time_cost * n_active + 0.0,  # + 0.0: no -0.0 when every robot has arrived
+        "inducing": sequential_sum(np.where(active, inducing_reward(distance, d_max), 0.0)),
+        "qos": 0.0 - constants.outage_penalty * n_outage,
+        "arrival": constants.arrival_reward * n_arriving,
+        "success": np.where(all_arrived & (n_arriving > 0), constants.success_reward, 0.0),
+    }
+
+
+def weighted_reward(components: Mapping[str, np.ndarray], weights: Mapping[str, float]) -> np.ndarray:
+    """
+    The reward ``sum_k weights[k] * components[k]``, summed in the order of ``components``.
+
+    :param components: the reward components (:func:`reward_components`), arrays of shape (...)
+    :param weights: a weight per component (:func:`phase_weights`); missing components weigh 0
+    :return: the reward, shape (...)
+    """
+    reward = 0.0
+    for name, value in components.items():
+        reward = reward + weights.get(name, 0.0) * value
+    return np.asarray(reward)
+
+
+def mission_quality_indicator(
+    t_total: float, mission_time: np.ndarray, outage_steps: np.ndarray, outage_penalty: float
+) -> np.ndarray:
+    """
+    Mission quality indicator ``MQI = T_total - sum_u (T_u + lambda T_out_u)`` (paper Eq. (14)).
+
+    :param t_total: ``T_total``, the MQI budget
+    :param mission_time: ``T_u``, steps until each robot arrived (``max_steps`` if it never did), (..., U)
+    :param outage_steps: steps each robot spent in outage, (..., U)
+    :param outage_penalty: ``lambda``
+    :return: the MQI, shape (...)
+    """
+    return t_total - (np.asarray(mission_time) + outage_penalty * np.asarray(outage_steps)).sum(axis=-1)
