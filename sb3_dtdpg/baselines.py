@@ -64,6 +64,8 @@ DDPG_KWARGS: dict[str, Any] = {
     "batch_size": 64,
     "tau": 0.002,
     "gamma": 0.99,
+    "learning_starts": 100,
+    "n_steps": 1,
     "policy_kwargs": {"net_arch": [128, 64]},
 }
 #: The hyperparameter sets of :func:`make_model`.
@@ -121,7 +123,7 @@ def base_learning_rate(algo: str, hyperparams: str = "paper") -> float:
     check_hyperparams(_check_algo(algo), hyperparams)
     if hyperparams == "tuned":
         return TUNED_KWARGS["learning_rate"]
-    if algo == "ddpg":
+    if algo in ("dtdpg", "ddpg"):
         return DDPG_KWARGS["learning_rate"]
     return inspect.signature(_CLASSES[algo]).parameters["learning_rate"].default
 
@@ -191,8 +193,10 @@ def make_model(
             options["phases"] = default_phases(destination_episodes=destination_episodes)
     elif destination_episodes is not None:
         raise ValueError(f"destination_episodes applies to 'dtdpg' only, got algo={algo!r}")
+    if algo in ("dtdpg", "ddpg") and hyperparams == "paper":
+        options.update(copy.deepcopy(DDPG_KWARGS))  # DTDPG's own defaults are the tuned set
     if algo == "ddpg":
-        options.update(DDPG_KWARGS)
+        options.update(copy.deepcopy(DDPG_KWARGS))
         options["action_noise"] = OrnsteinUhlenbeckActionNoise(np.zeros(n_actions), DDPG_OU_SIGMA * np.ones(n_actions))
     elif algo == "td3":
         options["action_noise"] = NormalActionNoise(np.zeros(n_actions), TD3_NOISE_SIGMA * np.ones(n_actions))

@@ -44,18 +44,18 @@ def _assert_same_params(model_a: DTDPG, model_b: DTDPG) -> None:
         th.testing.assert_close(params_a[key], params_b[key], rtol=0, atol=0, msg=key)
 
 
-def test_defaults_follow_table_1():
+def test_defaults_are_the_documented_tuned_set():
+    """The constructor's defaults are TUNED_KWARGS (zoo_configs/dtdpg.yml, docs/BENCHMARKS.md), not Table I."""
+    from sb3_dtdpg.baselines import TUNED_KWARGS
+
     model = DTDPG("MlpPolicy", "Pendulum-v1")
-    assert (model.learning_rate, model.batch_size, model.tau, model.buffer_size, model.gamma) == (
-        1e-4,
-        64,
-        0.002,
-        50_000,
-        0.99,
-    )
+    for key, value in TUNED_KWARGS.items():
+        if key != "policy_kwargs":
+            assert getattr(model, key) == value, key
+    assert model.policy.net_arch == TUNED_KWARGS["policy_kwargs"]["net_arch"]
     assert isinstance(model.policy, DTDPGPolicy)
     assert isinstance(model.actor.optimizer, th.optim.Adam)
-    assert [layer.out_features for layer in model.actor.mu if isinstance(layer, th.nn.Linear)] == [128, 64, 1]
+    assert [layer.out_features for layer in model.actor.mu if isinstance(layer, th.nn.Linear)] == [128, 128, 1]
     assert len(model.critic.q_networks) == 1  # DDPG: one critic
     assert model.policy_delay == 1 and model.target_noise_clip == 0.0
     # the noise: linearly decayed OU armed from the single phase of an env without reward phases
@@ -84,7 +84,7 @@ def test_phases_and_noise_on_a_phased_env():
     assert model.action_noise is user_noise and noise_sigma_of(model) == pytest.approx(0.2)
     phases = [dict(name="destination", n_episodes=2, sigma=0.3, final_sigma=0.1), dict(name="mqi", replay_handling="relabel")]
     model = DTDPG("MlpPolicy", PhasedPointEnv(), phases=phases)
-    assert model.replay_buffer_class is RewardComponentsReplayBuffer
+    assert model.replay_buffer_class is RewardComponentsNStepReplayBuffer  # the defaults use 3-step returns
     assert isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
     assert noise_sigma_of(model) == 0.3
     assert type(DTDPG("MlpPolicy", PhasedPointEnv(), replay_buffer_class=ReplayBuffer, phases=phases[:1]).replay_buffer) is (
@@ -143,7 +143,7 @@ def test_save_load(tmp_path):
     assert loaded.action_noise.episode == model.action_noise.episode == 2
     np.testing.assert_array_equal(loaded.action_noise.current_sigma, model.action_noise.current_sigma)
     assert loaded.phases == model.phases
-    assert loaded.learning_rate == 1e-4 and loaded.tau == 0.002
+    assert loaded.learning_rate == 1e-3 and loaded.tau == 0.005  # the defaults survive the round trip
     # loaded model trains on
     loaded.learn(60, reset_num_timesteps=False)
     assert loaded.num_timesteps == 510
