@@ -9,6 +9,7 @@ import numpy as np
 from gymnasium import spaces
 
 from noma_radiomap import geometry
+from noma_radiomap.actions import check_action
 from noma_radiomap.downlink import MULTIPLE_ACCESS, single_transmission
 from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import EXPECTED_FADING_DB, db_to_linear, dbm_to_watt
@@ -46,7 +47,9 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     | 3u + 2   | power: ``p_u = P_max (a + 1) / 2``, all scaled down to sum ``P_max`` if more | -1 | 1 |
 
     Robots move in sub-steps of at most half a cell and slide along walls (SPEC 2.7); an arrived robot's
-    actions are ignored and it gets no power.
+    actions are ignored and it gets no power. Finite actions outside [-1, 1] are clipped; an action of another
+    shape than ``(3U,)``, or with a NaN or infinite component, raises a ``ValueError`` naming the robot and the
+    component, and leaves the env's state unchanged (:func:`noma_radiomap.actions.check_action`).
 
     ## Observation Space
 
@@ -300,7 +303,7 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._observation(), {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        action = np.asarray(action, dtype=np.float64).reshape(self.n_robots, 3)
+        action = check_action(action, self.n_robots)
         was_arrived = self.arrived
         positions, at_goal = self._motion.move(self.positions, action[:, :2], self.destinations, ~was_arrived)
         self.positions = positions
