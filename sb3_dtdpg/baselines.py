@@ -192,7 +192,7 @@ def make_model(
     elif destination_episodes is not None:
         raise ValueError(f"destination_episodes applies to 'dtdpg' only, got algo={algo!r}")
     if algo == "ddpg":
-        options.update(DDPG_KWARGS)
+        options.update(copy.deepcopy(DDPG_KWARGS))  # SB3 adds keys to policy_kwargs in place
         options["action_noise"] = OrnsteinUhlenbeckActionNoise(np.zeros(n_actions), DDPG_OU_SIGMA * np.ones(n_actions))
     elif algo == "td3":
         options["action_noise"] = NormalActionNoise(np.zeros(n_actions), TD3_NOISE_SIGMA * np.ones(n_actions))
