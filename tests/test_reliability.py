@@ -287,3 +287,16 @@ def test_map_keeps_a_hostile_scenario_name_inside_out(tmp_path):
     assert main(["map", "--scenario", str(path), "--out", str(out)]) == 0
     assert [p.name for p in out.iterdir()] == ["maps_x_escaped.png"]
     assert [p.parent for p in tmp_path.rglob("*.png")] == [out]
+
+
+def test_curriculum_checkpoints_leave_no_temp_files_and_clean_old_ones(tmp_path):
+    import gymnasium as gym
+
+    from sb3_dtdpg import DTDPG
+
+    stale = tmp_path / ".phase_0_destination.zip.killed.tmp"
+    stale.write_bytes(b"")  # a save killed by SIGKILL
+    env = gym.make("NomaRadioMap-v0", scenario="small")
+    model = DTDPG("MlpPolicy", env, learning_starts=10, curriculum_save_path=str(tmp_path), policy_kwargs={"net_arch": [8]})
+    model.learn(1)
+    assert not stale.exists()
