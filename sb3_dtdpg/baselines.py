@@ -196,7 +196,7 @@ def make_model(
     if algo in ("dtdpg", "ddpg") and hyperparams == "paper":
         options.update(copy.deepcopy(DDPG_KWARGS))  # DTDPG's own defaults are the tuned set
     if algo == "ddpg":
-        options.update(copy.deepcopy(DDPG_KWARGS))
+        options.update(copy.deepcopy(DDPG_KWARGS))  # SB3 adds keys to policy_kwargs in place
         options["action_noise"] = OrnsteinUhlenbeckActionNoise(np.zeros(n_actions), DDPG_OU_SIGMA * np.ones(n_actions))
     elif algo == "td3":
         options["action_noise"] = NormalActionNoise(np.zeros(n_actions), TD3_NOISE_SIGMA * np.ones(n_actions))

@@ -3,7 +3,8 @@
 Subcommands:
 
 - ``map``: the power and SINR maps of a scenario (the paper's Fig. 4);
-- ``train``: one training run with TensorBoard logging, then its test evaluation;
+- ``train``: one training run with TensorBoard logging and periodic checkpoints (the same command resumes
+  it), then its test evaluation;
 - ``compare``: the main job: DT-DPG vs DDPG in NOMA and OMA, several seeds in parallel, the results
   table (printed, Markdown, CSV) with the planners as references, learning curves and trajectories;
 - ``reproduce``: every experiment of the paper (the paper's Section V), resumable.
@@ -28,67 +29,66 @@ _HYPERPARAMS_HELP = (
 def _cmd_map(args: argparse.Namespace) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     from noma_radiomap import RadioMap, load_scenario
+    from sb3_dtdpg.common.files import safe_name
 
     scenario = load_scenario(args.scenario)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     radio_map = RadioMap.for_scenario(scenario)
-    path = out / f"maps_{scenario.name}.png"
+    path = out / f"maps_{safe_name(scenario.name)}.png"  # the name is user text: never a path
     radio_map.plot_maps(str(path))
     print(f"wrote {path} (outage share with full power to one robot: {100 * radio_map.outage_share():.1f} % of free cells)")
     return 0
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    import torch as th
-    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+    from sb3_dtdpg.experiments.runs import RunSpec, output_lock, read_checkpoint, run_one
 
-    import noma_radiomap  # noqa: F401
-    from sb3_dtdpg.baselines import make_env, make_model, mission_callbacks
-    from sb3_dtdpg.evaluation import evaluate
-    from sb3_dtdpg.experiments.runs import EpisodeReturnLogger
-
-    if args.threads:
-        th.set_num_threads(args.threads)
-    env_kwargs = {} if args.scenario is None else {"scenario": args.scenario}
-    env = make_env(args.algo, args.env, args.multiple_access, args.channel, env_kwargs)
-    model = make_model(
+    spec = RunSpec(
         args.algo,
-        env,
-        seed=args.seed,
-        tensorboard_log=args.tb,
+        args.multiple_access,
+        args.seed,
+        args.episodes,
+        channel=args.channel,
         learning_rate=args.learning_rate,
-        verbose=args.verbose,
+        env_id=args.env,
+        scenario=args.scenario,
+        eval_episodes=args.eval_episodes,
+        eval_seed=args.eval_seed,
+        eval_before_transfer=False,
         hyperparams=args.hyperparams,
-    )
-    max_steps = int(env.unwrapped.scenario.mission.max_steps)
-    callbacks = [EpisodeReturnLogger(), *mission_callbacks(model)]
-    if args.timesteps is not None:
-        total = args.timesteps
-    else:
-        total = args.episodes * max_steps
-        callbacks.append(StopTrainingOnMaxEpisodes(args.episodes))
-    run_name = f"{args.algo}_{args.multiple_access}_s{args.seed}"
-    model.learn(
-        total_timesteps=total, callback=callbacks, log_interval=1, tb_log_name=run_name, progress_bar=not args.no_progress
+        timesteps=args.timesteps,
     )
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    model.save(out / f"{run_name}.zip")
-    result = evaluate(
-        model,
-        args.env,
-        n_episodes=args.eval_episodes,
-        seed=args.eval_seed,
-        channel="rayleigh",
-        multiple_access=args.multiple_access,
-        env_kwargs=env_kwargs,
-    )
-    summary = result.summary()
+    run_dir = out / "runs" / spec.run_id
+    try:
+        with output_lock(out, f".{spec.run_id}.lock"):
+            result = run_one(
+                spec,
+                out,
+                tensorboard_dir=args.tb,
+                checkpoint_every=args.checkpoint_every,
+                resume=True,
+                threads=args.threads or None,
+                progress_bar=not args.no_progress,
+                verbose=args.verbose,
+            )
+    except KeyboardInterrupt:
+        checkpoint = read_checkpoint(run_dir)
+        if checkpoint is None:
+            saved = f"nothing saved yet (the first checkpoint comes after {args.checkpoint_every} episodes)"
+        else:
+            saved = f"the checkpoint after {checkpoint['episodes']} episodes is in {checkpoint['path']}"
+        print(f"interrupted: {saved}; run the same command again to resume from there", file=sys.stderr)
+        return 130
+    summary = result["eval"]["summary"]
+    resumed = result["train"].get("resumed_at_episode")
     print(
-        f"{run_name}: {model.num_timesteps} steps; test ({args.eval_episodes} Rayleigh episodes): "
-        f"success {100 * summary['success_rate']:.0f} %, MQI {summary['mqi']:.1f} ± {summary['mqi_ci']:.1f}; "
-        f"model saved to {out / (run_name + '.zip')}"
+        f"{spec.run_id}: {result['train']['timesteps']} steps, {result['train']['episodes']} episodes"
+        + (f" (resumed after episode {resumed})" if resumed is not None else "")
+        + f"; test ({spec.eval_episodes} Rayleigh episodes): success {100 * summary['success_rate']:.0f} %, "
+        f"MQI {summary['mqi']:.1f} ± {summary['mqi_ci']:.1f}; model: {run_dir / 'model.zip'}, result: "
+        f"{run_dir / 'result.json'}, TensorBoard: {Path(args.tb) / spec.run_id}"
     )
     return 0
 
@@ -168,7 +168,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--learning-rate", type=float, default=None, help="override the algorithm's learning rate")
     p.add_argument("--hyperparams", choices=HYPERPARAMS, default="paper", help=_HYPERPARAMS_HELP)
     p.add_argument("--tb", default="runs", help="TensorBoard folder (default: runs)")
-    p.add_argument("--out", default="results/train", help="where the model is saved (default: results/train)")
+    p.add_argument(
+        "--out",
+        default="results/train",
+        help="output folder: <out>/runs/<run id>/ gets the model, checkpoints and result (default: results/train)",
+    )
+    p.add_argument(
+        "--checkpoint-every",
+        type=_positive,
+        default=10,
+        help="save model and replay buffer every N episodes; the same command resumes from the last one (default: 10)",
+    )
     p.add_argument("--eval-episodes", type=_positive, default=20)
     p.add_argument("--eval-seed", type=int, default=10_000)
     p.add_argument("--threads", type=int, default=0, help="torch threads (default: torch's)")

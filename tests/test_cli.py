@@ -10,7 +10,7 @@ from tbparse import SummaryReader
 from sb3_dtdpg.cli import main
 from sb3_dtdpg.experiments.compare import compare_specs
 from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
-from sb3_dtdpg.experiments.runs import BUDGETS, result_path
+from sb3_dtdpg.experiments.runs import BUDGETS, result_path, run_identity
 
 # tbparse 0.0.9 sorts with pandas' deprecated `inplace=True`.
 pytestmark = pytest.mark.filterwarnings("ignore:The inplace keyword:DeprecationWarning", "ignore::FutureWarning")
@@ -63,10 +63,11 @@ def _fake_result(spec, mqi):
     summary = {"n_episodes": 1.0, "success_rate": 1.0, "mqi": mqi, "outage_steps": 3.0, "mission_time": 9.0}
     summary.update({f"{k}_ci": 0.0 for k in ("mqi", "outage_steps", "mission_time", "path_length", "episode_return")})
     return {
+        "identity": run_identity(spec),
         "spec": dataclasses.asdict(spec),
         "run_id": spec.run_id,
         "group": spec.group,
-        "train": {"timesteps": 1, "episodes": 1, "wall_s": 1.0, "steps_per_s": 1.0},
+        "train": {"timesteps": 60 * spec.episodes, "episodes": spec.episodes, "wall_s": 1.0, "steps_per_s": 1.0},
         "eval": {"summary": summary, "episodes": [], "trajectories": [trajectory]},
     }
 
@@ -121,8 +122,10 @@ def test_map_and_train_commands(tmp_path):
     assert (tmp_path / "maps" / "maps_small.png").stat().st_size > 0
     args = ["train", "--algo", "ddpg", "--scenario", "small", "--episodes", "2", "--eval-episodes", "1", "--no-progress"]
     assert main([*args, "--tb", str(tmp_path / "tb"), "--out", str(tmp_path / "models")]) == 0
-    assert (tmp_path / "models" / "ddpg_noma_s0.zip").exists()
-    events = list((tmp_path / "tb").rglob("events.out.tfevents*"))
+    assert (tmp_path / "models" / "runs" / "ddpg_noma_s0" / "model.zip").exists()
+    result = json.loads((tmp_path / "models" / "runs" / "ddpg_noma_s0" / "result.json").read_text())
+    assert result["train"]["episodes"] == 2 and len(result["eval"]["episodes"]) == 1
+    events = list((tmp_path / "tb" / "ddpg_noma_s0").rglob("events.out.tfevents*"))
     assert events and "mission/mqi" in set(SummaryReader(str(events[0].parent)).scalars["tag"])
 
 

@@ -8,6 +8,7 @@ import numpy as np
 from gymnasium import spaces
 
 from noma_radiomap import geometry, rewards
+from noma_radiomap.actions import check_action
 from noma_radiomap.downlink import MULTIPLE_ACCESS, DownlinkResult, in_outage, single_transmission
 from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import (
@@ -87,7 +88,9 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     | 3u + 2   | power: ``p_u = P_max (a + 1) / 2``, all scaled down to sum ``P_max`` if more | -1 | 1 |
 
     Robots move in sub-steps of at most half a cell and slide along walls (paper Sec. IV-D); an arrived robot's
-    actions are ignored and it gets no power.
+    actions are ignored and it gets no power. Finite actions outside [-1, 1] are clipped; an action of another
+    shape than ``(3U,)``, or with a NaN or infinite component, raises a ``ValueError`` naming the robot and the
+    component, and leaves the env's state unchanged (:func:`noma_radiomap.actions.check_action`).
 
     ## Observation Space
 
@@ -311,7 +314,7 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._get_obs(), {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        action = np.asarray(action, dtype=np.float64).reshape(self.n_robots, 3)
+        action = check_action(action, self.n_robots)
         # Robots that arrived before this step are inactive: no motion, no power, no time cost, no outage.
         active = ~self.arrived
         arriving = self._move(action[:, :2], active)

@@ -6,14 +6,26 @@ robots' missions and the mission constants. All dataclasses are frozen and hold 
 :class:`Scenario` is hashable and can key caches (:meth:`noma_radiomap.RadioMap.for_scenario`).
 
 Every field is validated on construction from a mapping (:meth:`Scenario.from_dict`); a bad field
-raises a ``ValueError`` naming its path (e.g. ``obstacles[3].boxes[1]``) and the offending value.
+raises a ``ValueError`` naming its path (e.g. ``obstacles[3].boxes[1]``) and the offending value. An unknown
+key is reported with the closest known one (``unknown key 'wal_loss_db' (did you mean 'wall_loss_db'?)``).
+
+YAML files are read with YAML 1.2 number rules (``15e3`` and ``1.0e9`` are numbers, not strings), duplicate
+keys are errors, and a file that is not UTF-8, nests deeper than :data:`MAX_NESTING` or is larger than
+:data:`MAX_FILE_BYTES` gives a ``ValueError`` naming the file. Limits checked at load time, before anything
+is built: at most :data:`MAX_GRID_CELLS` grid cells, :data:`MAX_SUBSTEPS` motion sub-steps per env step
+(``V_max time_step`` over half a cell), :data:`MAX_LIST_ITEMS` entries in any list, and physical ranges
+(:data:`RANGES`) for every radio, power, height and mission constant. Error messages quote values through
+a bounded ``repr`` (at most :data:`MAX_MESSAGE_CHARS` characters), so a YAML alias bomb cannot hang them.
 """
 
 from __future__ import annotations
 
+import difflib
 import functools
 import math
 import os
+import re
+import reprlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -30,6 +42,45 @@ Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
 #: ``(x0, y0, x1, y1, z_bottom, z_top)`` in metres.
 Box = tuple[float, float, float, float, float, float]
+
+#: Most grid cells a room may have (the ``mall``: 6 600); the radio map holds several float arrays per cell.
+MAX_GRID_CELLS = 4_000_000
+#: Most motion sub-steps of half a cell in one env step (``ceil(V_max time_step / (resolution / 2))``).
+MAX_SUBSTEPS = 256
+#: Most entries in any list of a scenario (robots, destinations, obstacles, boxes, interferers).
+MAX_LIST_ITEMS = 10_000
+#: Deepest nesting of mappings and lists in a scenario file (the schema needs 4).
+MAX_NESTING = 32
+#: Largest scenario file read.
+MAX_FILE_BYTES = 4_000_000
+#: Longest name (scenario, obstacle, interferer).
+MAX_NAME_CHARS = 100
+#: Longest quoted value in an error message.
+MAX_MESSAGE_CHARS = 200
+#: Physical range ``(low, high)`` of each constant (inclusive), by field path (``*``: any list index).
+RANGES: dict[str, tuple[float, float]] = {
+    "room.width": (0.0, 10_000.0),
+    "room.depth": (0.0, 10_000.0),
+    "robot.body_height": (0.0, 10.0),
+    "robot.antenna_height": (0.0, 10.0),
+    "robot.v_max": (0.0, 100.0),
+    "robot.arrival_radius": (0.0, 1_000.0),
+    "radio.frequency_mhz": (100.0, 100_000.0),  # ITU-R P.1238 covers 300 MHz to 450 GHz; 100 GHz is plenty
+    "radio.nlos_distance_coefficient": (0.0, 100.0),
+    "radio.wall_loss_db": (0.0, 100.0),
+    "radio.wall_loss_step_db": (0.0, 100.0),
+    "radio.noise_dbm_per_hz": (-250.0, -100.0),  # thermal noise: -174 dBm/Hz
+    "radio.bandwidth_per_robot_hz": (0.0, 1e10),
+    "radio.qos_rate_bps": (0.0, 1e12),
+    "ap.position[2]": (0.0, 50.0),
+    "ap.max_power_dbm": (-100.0, 60.0),  # 60 dBm = 1 kW
+    "interferers[*].position": (-100_000.0, 100_000.0),
+    "interferers[*].power_dbm": (-100.0, 80.0),
+    "mission.t_total": (0.0, 1e9),
+    "mission.outage_penalty": (0.0, 1e6),
+    "mission.max_steps": (1, 10_000_000),
+    "mission.time_step": (0.0, 3_600.0),
+}
 
 
 @dataclass(frozen=True)
@@ -306,32 +357,61 @@ def _fields(obj: Any) -> dict[str, Any]:
 # --------------------------------------------------------------------------------------------------
 
 
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxdict, _REPR.maxtuple = 3, 8, 8, 8
+_REPR.maxstring, _REPR.maxother, _REPR.maxlong = MAX_MESSAGE_CHARS, MAX_MESSAGE_CHARS, 40
+
+
+def _quote(value: Any) -> str:
+    """A ``repr`` of bounded size and time (nested and shared structures are cut short)."""
+    text = _REPR.repr(value)
+    return text if len(text) <= MAX_MESSAGE_CHARS else text[: MAX_MESSAGE_CHARS - 3] + "..."
+
+
 def _describe(value: Any) -> str:
-    return f"{value!r} ({type(value).__name__})"
+    return f"{_quote(value)} ({type(value).__name__})"
+
+
+def _check_range(value: float, path: str, key: str | None = None) -> float:
+    low, high = RANGES[key or path]
+    if not low <= value <= high:
+        raise ValueError(f"{path}: {value!r} is outside the physical range [{low:g}, {high:g}]")
+    return value
+
+
+def _suggest(key: Any, known: tuple[str, ...]) -> str:
+    close = difflib.get_close_matches(str(key), known, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def _mapping(value: Any, path: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> Mapping[str, Any]:
     where = path or "scenario"
     if not isinstance(value, Mapping):
         raise ValueError(f"{where}: expected a mapping, got {_describe(value)}")
+    prefix = f"{path}." if path else ""
+    known = required + optional
+    # Unknown keys first: a typo'd key is also a missing one, and the typo is the useful message.
+    unknown = [key for key in value if key not in known]
+    if unknown:
+        key = unknown[0] if isinstance(unknown[0], str) and len(unknown[0]) <= MAX_NAME_CHARS else _quote(unknown[0])
+        raise ValueError(f"{prefix}{key}: unknown key{_suggest(key, known)} (known keys of {where}: {sorted(known)})")
     missing = [key for key in required if key not in value]
     if missing:
-        prefix = f"{path}." if path else ""
-        raise ValueError(f"{prefix}{missing[0]}: missing key (in {where}, which has keys {sorted(map(str, value))})")
-    unknown = [key for key in value if key not in required and key not in optional]
-    if unknown:
-        prefix = f"{path}." if path else ""
-        raise ValueError(f"{prefix}{unknown[0]}: unknown key (known keys of {where}: {sorted(required + optional)})")
+        raise ValueError(f"{prefix}{missing[0]}: missing key (in {where}, which has keys {_quote(sorted(map(str, value)))})")
     return value
 
 
 def _number(value: Any, path: str, *, positive: bool = False, nonnegative: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"{path}: expected a number, got {_describe(value)}")
+    if abs(value) > 1e300:  # an int too large for a float, or a float too large for arithmetic
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f"{path}: expected a finite number, got {value!r}")
+        raise ValueError(f"{path}: {_quote(value)} is out of range")
     if not math.isfinite(value):
         raise ValueError(f"{path}: expected a finite number, got {value!r}")
     if positive and value <= 0:
-        raise ValueError(f"{path}: must be > 0, got {value!r}")
+        raise ValueError(f"{path}: must be > 0, got {_quote(value)}")
     if nonnegative and value < 0:
         raise ValueError(f"{path}: must be >= 0, got {value!r}")
     return float(value)
@@ -351,6 +431,8 @@ def _integer(value: Any, path: str, *, positive: bool = False) -> int:
 def _string(value: Any, path: str) -> str:
     if not isinstance(value, str) or not value:
         raise ValueError(f"{path}: expected a non-empty string, got {_describe(value)}")
+    if len(value) > MAX_NAME_CHARS:
+        raise ValueError(f"{path}: {len(value)} characters, more than the limit of {MAX_NAME_CHARS}: {_quote(value)}")
     return value
 
 
@@ -359,13 +441,15 @@ def _list(value: Any, path: str, *, non_empty: bool = False) -> list[Any]:
         raise ValueError(f"{path}: expected a list, got {_describe(value)}")
     if non_empty and len(value) == 0:
         raise ValueError(f"{path}: expected a non-empty list, got {value!r}")
+    if len(value) > MAX_LIST_ITEMS:
+        raise ValueError(f"{path}: {len(value)} entries, more than the limit of {MAX_LIST_ITEMS}")
     return list(value)
 
 
 def _vector(value: Any, path: str, length: int) -> tuple[float, ...]:
     items = _list(value, path)
     if len(items) != length:
-        raise ValueError(f"{path}: expected a list of {length} numbers, got {value!r}")
+        raise ValueError(f"{path}: expected a list of {length} numbers, got {_quote(value)}")
     return tuple(_number(item, f"{path}[{k}]") for k, item in enumerate(items))
 
 
@@ -386,10 +470,17 @@ _OPTIONAL_TOP_KEYS = ("interferers", "obstacles")
 def _parse_room(data: Any) -> Room:
     d = _mapping(data, "room", ("width", "depth", "resolution"))
     room = Room(
-        width=_number(d["width"], "room.width", positive=True),
-        depth=_number(d["depth"], "room.depth", positive=True),
+        width=_check_range(_number(d["width"], "room.width", positive=True), "room.width"),
+        depth=_check_range(_number(d["depth"], "room.depth", positive=True), "room.depth"),
         resolution=_number(d["resolution"], "room.resolution", positive=True),
     )
+    # Before anything is built from the grid: a fine resolution would allocate until memory runs out.
+    n_cells = (room.width / room.resolution) * (room.depth / room.resolution)
+    if not n_cells <= MAX_GRID_CELLS:
+        raise ValueError(
+            f"room.resolution: {room.resolution!r} gives {n_cells:.3g} cells on {room.width!r} x {room.depth!r} m, "
+            f"more than the limit of {MAX_GRID_CELLS:,}"
+        )
     for side in ("width", "depth"):
         cells = getattr(room, side) / room.resolution
         if cells < 1 or abs(cells - round(cells)) > 1e-6 * max(1.0, cells):
@@ -403,25 +494,42 @@ def _parse_room(data: Any) -> Room:
 def _parse_simple(cls: type, data: Any, path: str, positive: tuple[str, ...], nonnegative: tuple[str, ...] = ()) -> Any:
     names = tuple(cls.__dataclass_fields__)
     d = _mapping(data, path, names)
-    return cls(
-        **{
-            name: _number(d[name], f"{path}.{name}", positive=name in positive, nonnegative=name in nonnegative)
-            for name in names
-        }
-    )
+    values = {}
+    for name in names:
+        key = f"{path}.{name}"
+        value = _number(d[name], key, positive=name in positive, nonnegative=name in nonnegative)
+        values[name] = _check_range(value, key) if key in RANGES else value
+    return cls(**values)
+
+
+def _check_robot(robot: RobotSpec, room: Room, mission: Mission) -> None:
+    if robot.body_height >= robot.antenna_height:
+        raise ValueError(
+            f"robot.body_height: {robot.body_height!r} must be below robot.antenna_height = {robot.antenna_height!r} "
+            "(the antenna sits on the body)"
+        )
+    n_substeps = math.ceil(robot.v_max * mission.time_step / (0.5 * room.resolution) - 1e-9)
+    if n_substeps > MAX_SUBSTEPS:
+        raise ValueError(
+            f"robot.v_max: {robot.v_max!r} m/s x mission.time_step {mission.time_step!r} s is {n_substeps} sub-steps "
+            f"of half a cell ({0.5 * room.resolution!r} m) per step, more than the limit of {MAX_SUBSTEPS}"
+        )
 
 
 def _parse_mission(data: Any) -> Mission:
     reward_keys = ("time_cost", "arrival_reward", "success_reward")
     d = _mapping(data, "mission", ("t_total", "outage_penalty", "max_steps", "time_step"), reward_keys)
     defaults = {name: Mission.__dataclass_fields__[name].default for name in reward_keys}
-    return Mission(
+    mission = Mission(
         t_total=_number(d["t_total"], "mission.t_total", positive=True),
         outage_penalty=_number(d["outage_penalty"], "mission.outage_penalty", nonnegative=True),
         max_steps=_integer(d["max_steps"], "mission.max_steps", positive=True),
         time_step=_number(d["time_step"], "mission.time_step", positive=True),
         **{name: _number(d.get(name, defaults[name]), f"mission.{name}") for name in reward_keys},
     )
+    for name in ("t_total", "outage_penalty", "max_steps", "time_step"):
+        _check_range(getattr(mission, name), f"mission.{name}")
+    return mission
 
 
 def _parse_ap(data: Any, room: Room) -> AccessPoint:
@@ -430,7 +538,9 @@ def _parse_ap(data: Any, room: Room) -> AccessPoint:
     _in_room(position, room, "ap.position")
     if position[2] <= 0:
         raise ValueError(f"ap.position: the antenna height z must be > 0, got {list(position)}")
-    return AccessPoint(position=position, max_power_dbm=_number(d["max_power_dbm"], "ap.max_power_dbm"))  # type: ignore[arg-type]
+    _check_range(position[2], "ap.position[2]")
+    power = _check_range(_number(d["max_power_dbm"], "ap.max_power_dbm"), "ap.max_power_dbm")
+    return AccessPoint(position=position, max_power_dbm=power)  # type: ignore[arg-type]
 
 
 def _parse_interferers(data: Any) -> tuple[Interferer, ...]:
@@ -441,10 +551,13 @@ def _parse_interferers(data: Any) -> tuple[Interferer, ...]:
         d = _mapping(item, path, ("name", "position", "power_dbm"))
         name = _string(d["name"], f"{path}.name")
         if name == "ap" or name in names:
-            raise ValueError(f'{path}.name: {name!r} is not unique ("ap" and other interferers\' names are taken)')
+            raise ValueError(f'{path}.name: {_quote(name)} is not unique ("ap" and other interferers\' names are taken)')
         names.add(name)
         position = _vector(d["position"], f"{path}.position", 3)
-        result.append(Interferer(name=name, position=position, power_dbm=_number(d["power_dbm"], f"{path}.power_dbm")))  # type: ignore[arg-type]
+        for j, coordinate in enumerate(position):
+            _check_range(coordinate, f"{path}.position[{j}]", "interferers[*].position")
+        power = _check_range(_number(d["power_dbm"], f"{path}.power_dbm"), f"{path}.power_dbm", "interferers[*].power_dbm")
+        result.append(Interferer(name=name, position=position, power_dbm=power))  # type: ignore[arg-type]
     return tuple(result)
 
 
@@ -471,7 +584,7 @@ def _parse_obstacles(data: Any, room: Room) -> tuple[Obstacle, ...]:
         d = _mapping(item, path, ("name", "boxes"))
         name = _string(d["name"], f"{path}.name")
         if name in names:
-            raise ValueError(f"{path}.name: {name!r} is not unique")
+            raise ValueError(f"{path}.name: {_quote(name)} is not unique")
         names.add(name)
         boxes = tuple(
             _parse_box(b, f"{path}.boxes[{j}]", room) for j, b in enumerate(_list(d["boxes"], f"{path}.boxes", non_empty=True))
@@ -560,6 +673,7 @@ def _parse_scenario(data: Any, source: str | None) -> Scenario:
         mission=_parse_mission(d["mission"]),
         source=source,
     )
+    _check_robot(scenario.robot, room, scenario.mission)
     _check_layout(scenario)
     return scenario
 
@@ -579,14 +693,71 @@ def list_scenarios() -> list[str]:
     return sorted(entry.name[: -len(".yaml")] for entry in folder.iterdir() if entry.name.endswith(".yaml"))
 
 
-def _read_yaml(text: str, source: str) -> Any:
+class ScenarioLoader(yaml.SafeLoader):
+    """
+    PyYAML's safe loader with YAML 1.2 floats (``15e3``, ``1.0e9``: PyYAML's YAML 1.1 rules read them as
+    strings), duplicate keys refused and nesting limited to :data:`MAX_NESTING`.
+    """
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: dict[Any, yaml.Node] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                hash(key)
+            except TypeError:
+                break  # the base class reports an unhashable key
+            if key in seen:
+                first = seen[key].start_mark
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {_quote(key)} (first at line {first.line + 1})", key_node.start_mark
+                )
+            seen[key] = key_node
+        return super().construct_mapping(node, deep=deep)
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
+        self._depth = getattr(self, "_depth", 0) + 1
+        try:
+            if self._depth > MAX_NESTING:
+                raise yaml.composer.ComposerError(
+                    None, None, f"nesting deeper than the limit of {MAX_NESTING}", self.peek_event().start_mark
+                )
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+# YAML 1.2 core schema floats (the 1.1 pattern of PyYAML needs a dot and a signed exponent).
+ScenarioLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+        |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+        |[-+]?\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+        |[-+]?\.(?:inf|Inf|INF)
+        |\.(?:nan|NaN|NAN))$""",
+        re.VERBOSE,
+    ),
+    list("-+0123456789."),
+)
+
+
+def _read_yaml(content: bytes, source: str) -> Any:
+    if len(content) > MAX_FILE_BYTES:
+        raise ValueError(f"{source}: {len(content):,} bytes, more than the limit of {MAX_FILE_BYTES:,}")
     try:
-        return yaml.safe_load(text)
+        text = content.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{source}: not a UTF-8 text file (byte {error.start}: {error.reason})") from None
+    try:
+        return yaml.load(text, Loader=ScenarioLoader)  # a SafeLoader subclass: builds plain data only
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None) or getattr(error, "context_mark", None)
         where = f"{source}, line {mark.line + 1}, column {mark.column + 1}" if mark is not None else source
         problem = getattr(error, "problem", None) or str(error)
         raise ValueError(f"{where}: malformed YAML: {problem}") from None
+    except RecursionError:
+        raise ValueError(f"{source}: malformed YAML: nested too deeply") from None
 
 
 def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
@@ -595,17 +766,22 @@ def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
 
     :param name_or_path: e.g. ``"mall"`` or ``"my_scenarios/office.yaml"``
     :return: the validated scenario
-    :raises ValueError: unknown name, malformed YAML (file and line) or an invalid field (its path and value)
+    :raises ValueError: unknown name, unreadable or malformed YAML (file and line), duplicate or unknown keys,
+        an invalid field (its path and value) or a limit exceeded (see the module docstring)
     """
     text = os.fspath(name_or_path)
     builtins = list_scenarios()
     if text in builtins and not isinstance(name_or_path, Path):
         resource = resources.files("noma_radiomap") / "scenarios" / f"{text}.yaml"
         source = f"{text}.yaml"
-        content = resource.read_text(encoding="utf-8")
+        content = resource.read_bytes()
     elif os.path.isfile(text):
         source = text
-        content = Path(text).read_text(encoding="utf-8")
+        try:
+            with open(text, "rb") as file:
+                content = file.read(MAX_FILE_BYTES + 1)
+        except OSError as error:
+            raise ValueError(f"{source}: cannot read the scenario file ({error.strerror})") from None
     else:
         raise ValueError(f"scenario {text!r}: unknown built-in name and no such file (built-in scenarios: {builtins})")
     return Scenario.from_dict(_read_yaml(content, source), source=source)

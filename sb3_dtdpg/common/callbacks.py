@@ -2,7 +2,6 @@
 
 import os
 import re
-import uuid
 import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -10,6 +9,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from sb3_dtdpg.common.files import atomic_write, remove_temp_files
 from sb3_dtdpg.common.noise import decaying_noise, noise_sigma, rearm_noise
 from sb3_dtdpg.common.phases import Phase, parse_phases
 
@@ -114,6 +114,8 @@ class CurriculumTransferCallback(BaseCallback):
     # ------------------------------------------------------------------ SB3 hooks
     def _on_training_start(self) -> None:
         self._check_setup()
+        if self.save_path is not None:
+            remove_temp_files(self.save_path)  # left by a process killed while saving
         self._pending_replay = None
         self._stop = False
         state = getattr(self.model, "curriculum_state", None)
@@ -270,16 +272,7 @@ class CurriculumTransferCallback(BaseCallback):
         path = self.checkpoint_path(index)
         if path is None:
             return None
-        os.makedirs(self.save_path, exist_ok=True)  # type: ignore[arg-type]
-        # Same folder as the target, so os.replace is an atomic rename: a reader never sees a partial file
-        tmp_path = os.path.join(self.save_path, f".{os.path.basename(path)}.{uuid.uuid4().hex}.zip")  # type: ignore[arg-type]
-        try:
-            self.model.save(tmp_path)
-            os.replace(tmp_path, path)
-        except BaseException:
-            if os.path.exists(tmp_path):
-                os.remove(tmp_path)
-            raise
+        atomic_write(path, self.model.save)  # a reader never sees a partial file
         return path
 
     def _record(self) -> None:

@@ -15,7 +15,7 @@ from typing import Any
 
 import pandas as pd
 
-from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
 __all__ = ["compare_specs", "evaluate_planners", "run_compare"]
 
@@ -116,6 +116,9 @@ def run_compare(
     :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :return: the summary table (learners and planners)
+    :raises OutputBusyError: another job is using ``out``
+    :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
+        scenario or hyperparameters): use another folder
     """
     from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
     from sb3_dtdpg.experiments import plots, tables
@@ -136,61 +139,64 @@ def run_compare(
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams)
-    report = run_many(specs, out, n_workers=n_workers, progress=progress)
-    for run_id, error in report.failed.items():
-        print(f"run {run_id} failed: {error}")
+    with output_lock(out):  # one job per folder: a second one would write the same run folders
+        specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams)
+        report = run_many(specs, out, n_workers=n_workers, progress=progress)
+        for run_id, error in report.failed.items():
+            print(f"run {run_id} failed: {error}")
 
-    results = {spec.run_id: load_result(out, spec) for spec in specs}
-    finished = [r for r in results.values() if r is not None]
-    records = tables.run_records(finished)
-    summary = tables.summarise(records) if not records.empty else pd.DataFrame()
-    planner_rows, planner_paths = evaluate_planners(modes, budget, env_id)
-    summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
-    title = (
-        f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes, "
-        f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds, {hyperparams} hyperparameters)"
-    )
-    tables.save_tables(summary, records, out, "results", title)
-    tables.print_table(summary, title)
-
-    groups: dict[str, list[Path]] = {}
-    for spec in specs:
-        if results[spec.run_id] is not None:
-            groups.setdefault(f"{tables.ALGO_LABELS[spec.algo]} {spec.multiple_access.upper()}", []).append(
-                out / "tb" / spec.run_id
-            )
-    if groups:
-        plots.plot_learning_curves(groups, out / "learning_curves.png", title="Learning curves (mean and 95 % CI over seeds)")
-    panels: dict[str, dict[str, Any]] = {}
-    goals: dict[str, Any] = {}
-    for mode in modes:
-        panel = {}
-        for algo in algos:
-            first = next(
-                (
-                    results[s.run_id]
-                    for s in specs
-                    if s.algo == algo and s.multiple_access == mode and results[s.run_id] is not None
-                ),
-                None,
-            )
-            if first is not None and first["eval"]["trajectories"]:
-                panel[f"{tables.ALGO_LABELS[algo]} (seed {first['spec']['seed']})"] = first["eval"]["trajectories"][0]
-                goals[mode.upper()] = plots.episode_destinations(first["eval"]["episodes"][0])
-        panel["comm-aware planner"] = planner_paths[mode]["comm-aware planner"]
-        panels[mode.upper()] = panel
-    plots.plot_trajectories(
-        budget.scenario or "mall",
-        panels,
-        out / "trajectories.png",
-        title="Test episode 0 (same mission and fading for every policy)",
-        destinations=goals,
-    )
-    if progress:
-        print(
-            f"wrote {out}/results.md, results.csv, results_runs.csv, learning_curves.png, trajectories.png; "
-            f"TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for {len(report.finished)} runs, "
-            f"{len(report.skipped)} already done)"
+        results = {spec.run_id: load_result(out, spec) for spec in specs}
+        finished = [r for r in results.values() if r is not None]
+        records = tables.run_records(finished)
+        summary = tables.summarise(records) if not records.empty else pd.DataFrame()
+        planner_rows, planner_paths = evaluate_planners(modes, budget, env_id)
+        summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
+        title = (
+            f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes, "
+            f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds, {hyperparams} hyperparameters)"
         )
-    return summary
+        tables.save_tables(summary, records, out, "results", title)
+        tables.print_table(summary, title)
+
+        groups: dict[str, list[Path]] = {}
+        for spec in specs:
+            if results[spec.run_id] is not None:
+                groups.setdefault(f"{tables.ALGO_LABELS[spec.algo]} {spec.multiple_access.upper()}", []).append(
+                    out / "tb" / spec.run_id
+                )
+        if groups:
+            plots.plot_learning_curves(
+                groups, out / "learning_curves.png", title="Learning curves (mean and 95 % CI over seeds)"
+            )
+        panels: dict[str, dict[str, Any]] = {}
+        goals: dict[str, Any] = {}
+        for mode in modes:
+            panel = {}
+            for algo in algos:
+                first = next(
+                    (
+                        results[s.run_id]
+                        for s in specs
+                        if s.algo == algo and s.multiple_access == mode and results[s.run_id] is not None
+                    ),
+                    None,
+                )
+                if first is not None and first["eval"]["trajectories"]:
+                    panel[f"{tables.ALGO_LABELS[algo]} (seed {first['spec']['seed']})"] = first["eval"]["trajectories"][0]
+                    goals[mode.upper()] = plots.episode_destinations(first["eval"]["episodes"][0])
+            panel["comm-aware planner"] = planner_paths[mode]["comm-aware planner"]
+            panels[mode.upper()] = panel
+        plots.plot_trajectories(
+            budget.scenario or "mall",
+            panels,
+            out / "trajectories.png",
+            title="Test episode 0 (same mission and fading for every policy)",
+            destinations=goals,
+        )
+        if progress:
+            print(
+                f"wrote {out}/results.md, results.csv, results_runs.csv, learning_curves.png, trajectories.png; "
+                f"TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for {len(report.finished)} runs, "
+                f"{len(report.skipped)} already done)"
+            )
+        return summary

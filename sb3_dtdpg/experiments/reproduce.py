@@ -27,7 +27,7 @@ from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import tables
 from sb3_dtdpg.experiments.compare import evaluate_planners
-from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
 __all__ = ["LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
 
@@ -160,6 +160,9 @@ def run_reproduce(
     :param train: run the unfinished runs; False only re-draws the tables and figures from the finished ones
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :return: the tables, by name
+    :raises OutputBusyError: another job is using ``out``
+    :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
+        scenario or hyperparameters): use another folder
     """
     from sb3_dtdpg.experiments import tables
 
@@ -169,74 +172,75 @@ def run_reproduce(
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
-    experiments = reproduce_specs(budget, seeds, hyperparams)
-    unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
-    # Seed by seed, so that an interrupted job has whole seeds of every experiment.
-    unique.sort(key=lambda spec: spec.seed)
-    if train:
-        report = run_many(unique, out, n_workers=n_workers, progress=progress)
-        for run_id, error in report.failed.items():
-            print(f"run {run_id} failed: {error}")
-    results = {spec.run_id: load_result(out, spec) for spec in unique}
+    with output_lock(out):  # one job per folder: a second one would write the same run folders
+        base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
+        experiments = reproduce_specs(budget, seeds, hyperparams)
+        unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
+        # Seed by seed, so that an interrupted job has whole seeds of every experiment.
+        unique.sort(key=lambda spec: spec.seed)
+        if train:
+            report = run_many(unique, out, n_workers=n_workers, progress=progress)
+            for run_id, error in report.failed.items():
+                print(f"run {run_id} failed: {error}")
+        results = {spec.run_id: load_result(out, spec) for spec in unique}
 
-    def records(name: str) -> pd.DataFrame:
-        return tables.run_records([results[s.run_id] for s in experiments[name] if results[s.run_id] is not None])
+        def records(name: str) -> pd.DataFrame:
+            return tables.run_records([results[s.run_id] for s in experiments[name] if results[s.run_id] is not None])
 
-    out_tables: dict[str, pd.DataFrame] = {}
-    # Table II.
-    rec = records("table_ii")
-    if not rec.empty:
-        summary = tables.summarise(rec, by=("multiple_access", "training", "episodes"))
-        summary["approach"] = ["radio map" if t == "radio_map" else "reality" for t in summary["training"]]
-        summary["paper_mqi"] = [
-            PAPER_TABLE_II.get((m, a, "E" if n == budget.episodes else "L"), math.nan)
-            for m, a, n in zip(summary["multiple_access"], summary["approach"], summary["episodes"], strict=False)
-        ]
-        summary = summary.sort_values(["multiple_access", "training", "episodes"], ascending=[False, True, True])
-        tables.save_tables(
-            summary,
-            rec,
-            out,
-            "table_ii",
-            f"Table II: DT-DPG test MQI ({budget.name} budget, {hyperparams} hyperparameters)",
-            columns=("multiple_access", "approach", "episodes"),
-        )
-        out_tables["table_ii"] = summary
-        if progress:
-            tables.print_table(summary, "Table II (DT-DPG)", columns=("multiple_access", "approach", "episodes"))
-    # DDPG vs DT-DPG.
-    rec = records("ddpg_vs_dtdpg")
-    if not rec.empty:
-        summary = tables.summarise(rec)
-        planner_rows, _ = evaluate_planners(("noma", "oma"), budget)
-        summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
-        title = f"DDPG vs DT-DPG ({budget.name} budget, {hyperparams} hyperparameters, radio-map training)"
-        tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", title)
-        out_tables["ddpg_vs_dtdpg"] = summary
-        if progress:
-            tables.print_table(summary, "DDPG vs DT-DPG")
-    # Learning rates.
-    rec = records("learning_rates")
-    if not rec.empty:
-        rec["learning_rate"] = rec["learning_rate"].fillna(base_lr)
-        summary = tables.summarise(rec, by=("multiple_access", "learning_rate"))
-        tables.save_tables(
-            summary,
-            rec,
-            out,
-            "learning_rates",
-            f"DT-DPG with two learning rates ({budget.name} budget, {hyperparams} hyperparameters)",
-            columns=("multiple_access", "learning_rate"),
-        )
-        out_tables["learning_rates"] = summary
-        if progress:
-            tables.print_table(summary, "Learning rates (DT-DPG)", columns=("multiple_access", "learning_rate"))
-    dip = _dip_table(out, experiments, results)
-    if dip is not None:
-        out_tables["transfer_dip"] = dip
-    _figures(out, budget, experiments, results, base_lr)
-    return out_tables
+        out_tables: dict[str, pd.DataFrame] = {}
+        # Table II.
+        rec = records("table_ii")
+        if not rec.empty:
+            summary = tables.summarise(rec, by=("multiple_access", "training", "episodes"))
+            summary["approach"] = ["radio map" if t == "radio_map" else "reality" for t in summary["training"]]
+            summary["paper_mqi"] = [
+                PAPER_TABLE_II.get((m, a, "E" if n == budget.episodes else "L"), math.nan)
+                for m, a, n in zip(summary["multiple_access"], summary["approach"], summary["episodes"], strict=False)
+            ]
+            summary = summary.sort_values(["multiple_access", "training", "episodes"], ascending=[False, True, True])
+            tables.save_tables(
+                summary,
+                rec,
+                out,
+                "table_ii",
+                f"Table II: DT-DPG test MQI ({budget.name} budget, {hyperparams} hyperparameters)",
+                columns=("multiple_access", "approach", "episodes"),
+            )
+            out_tables["table_ii"] = summary
+            if progress:
+                tables.print_table(summary, "Table II (DT-DPG)", columns=("multiple_access", "approach", "episodes"))
+        # DDPG vs DT-DPG.
+        rec = records("ddpg_vs_dtdpg")
+        if not rec.empty:
+            summary = tables.summarise(rec)
+            planner_rows, _ = evaluate_planners(("noma", "oma"), budget)
+            summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
+            title = f"DDPG vs DT-DPG ({budget.name} budget, {hyperparams} hyperparameters, radio-map training)"
+            tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", title)
+            out_tables["ddpg_vs_dtdpg"] = summary
+            if progress:
+                tables.print_table(summary, "DDPG vs DT-DPG")
+        # Learning rates.
+        rec = records("learning_rates")
+        if not rec.empty:
+            rec["learning_rate"] = rec["learning_rate"].fillna(base_lr)
+            summary = tables.summarise(rec, by=("multiple_access", "learning_rate"))
+            tables.save_tables(
+                summary,
+                rec,
+                out,
+                "learning_rates",
+                f"DT-DPG with two learning rates ({budget.name} budget, {hyperparams} hyperparameters)",
+                columns=("multiple_access", "learning_rate"),
+            )
+            out_tables["learning_rates"] = summary
+            if progress:
+                tables.print_table(summary, "Learning rates (DT-DPG)", columns=("multiple_access", "learning_rate"))
+        dip = _dip_table(out, experiments, results)
+        if dip is not None:
+            out_tables["transfer_dip"] = dip
+        _figures(out, budget, experiments, results, base_lr)
+        return out_tables
 
 
 def _figures(

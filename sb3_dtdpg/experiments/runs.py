@@ -4,18 +4,30 @@ A run is described by a :class:`RunSpec`; :func:`run_one` trains it with TensorB
 ``<out>/tb/<run_id>``, saves the model and writes ``<out>/runs/<run_id>/result.json`` last, atomically:
 a run whose result file exists is finished, which is what makes the experiments resumable and keeps
 every finished run when a job is interrupted.
+
+A result file records the run's identity (:func:`run_identity`): the spec, the scenario's full content, the
+hyperparameters the algorithm is built with and :data:`RUN_FORMAT_VERSION`. A stored result is used only
+when its identity is the one asked for; otherwise the run is refused loudly (:class:`RunMismatchError`)
+instead of reporting another experiment's result under this one's name. :func:`output_lock` keeps two jobs
+out of one folder, and the worker processes of :func:`run_many` end when their parent process ends.
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import dataclasses
+import inspect
 import json
 import math
 import multiprocessing
 import os
 import shutil
+import signal
+import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,18 +36,29 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from sb3_dtdpg.common.files import atomic_write, remove_temp_files
+
 __all__ = [
     "BUDGETS",
     "PUBLIC_BUDGETS",
+    "RUN_FORMAT_VERSION",
     "Budget",
+    "OutputBusyError",
+    "RunMismatchError",
     "RunReport",
     "RunSpec",
     "get_budget",
     "load_result",
+    "output_lock",
     "result_path",
+    "run_identity",
     "run_many",
     "run_one",
+    "worker_pool",
 ]
+
+#: Version of what a run is and what its result file holds; results of another version are not reused.
+RUN_FORMAT_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -113,6 +136,7 @@ class RunSpec:
     :param eval_before_transfer: DT-DPG only: also evaluate the network saved at the end of the destination
         phase (the "before transfer" trajectories of the paper's Fig. 5b)
     :param hyperparams: hyperparameter set of :func:`sb3_dtdpg.baselines.make_model` (``"paper"`` or ``"tuned"``)
+    :param timesteps: train for this many timesteps instead of ``episodes`` episodes (None: by episodes)
     """
 
     algo: str
@@ -131,6 +155,7 @@ class RunSpec:
     inducing: str | None = None
     eval_before_transfer: bool = True
     hyperparams: str = "paper"
+    timesteps: int | None = None
 
     @property
     def _suffix(self) -> str:
@@ -152,21 +177,144 @@ class RunSpec:
         return kwargs if self.inducing is None else {**kwargs, "inducing": self.inducing}
 
 
+class RunMismatchError(ValueError):
+    """A stored result or checkpoint belongs to another run than the one asked for (same run id, other identity)."""
+
+
+class OutputBusyError(RuntimeError):
+    """Another process holds the output folder's lock."""
+
+
 def result_path(out: str | Path, spec: RunSpec) -> Path:
     """:return: the result file of a run (its existence means the run is finished)"""
     return Path(out) / "runs" / spec.run_id / "result.json"
 
 
-def load_result(out: str | Path, spec: RunSpec) -> dict[str, Any] | None:
-    """:return: the stored result of a finished run, or None"""
+def _hyperparameters(spec: RunSpec) -> dict[str, Any]:
+    """What :func:`sb3_dtdpg.baselines.make_model` builds the algorithm with: the class defaults and the set's values."""
+    from sb3_dtdpg import baselines
+
+    cls = baselines.algorithm_class(spec.algo)
+    values: dict[str, Any] = {
+        name: repr(parameter.default)
+        for name, parameter in inspect.signature(cls).parameters.items()
+        if parameter.default is not inspect.Parameter.empty
+    }
+    if spec.algo == "ddpg":
+        values.update(baselines.DDPG_KWARGS, ou_sigma=baselines.DDPG_OU_SIGMA)
+    elif spec.algo == "td3":
+        values["noise_sigma"] = baselines.TD3_NOISE_SIGMA
+    if spec.hyperparams == "tuned":
+        values.update(baselines.TUNED_KWARGS)
+    return values
+
+
+def run_identity(spec: RunSpec) -> dict[str, Any]:
+    """
+    Everything that determines a run's result, as stored in its result file: :data:`RUN_FORMAT_VERSION`, the
+    spec (algorithm, mode, seed, budget in episodes, channel, evaluation, ...), the full content of the
+    scenario (a scenario file edited since is another run) and the hyperparameters of the algorithm.
+
+    :param spec: the run
+    :return: a JSON-ready mapping (lists, not tuples: compare it with a stored one as is)
+    """
+    import gymnasium as gym
+
+    import noma_radiomap
+    from sb3_dtdpg.baselines import check_hyperparams
+
+    check_hyperparams(spec.algo, spec.hyperparams)
+    scenario = spec.scenario
+    if scenario is None:
+        scenario = gym.spec(spec.env_id).kwargs.get("scenario", "mall")
+    identity = {
+        "format": RUN_FORMAT_VERSION,
+        "spec": dataclasses.asdict(spec),
+        "scenario": noma_radiomap.load_scenario(scenario).to_dict(),
+        "hyperparameters": _hyperparameters(spec),
+    }
+    return json.loads(json.dumps(identity, default=_json_default))
+
+
+def _differences(stored: Any, expected: Any, path: str = "") -> list[str]:
+    if isinstance(stored, dict) and isinstance(expected, dict):
+        found = []
+        order = ("format", "spec", "scenario", "hyperparameters")  # the telling differences first
+        keys = sorted(set(stored) | set(expected), key=lambda k: (order.index(k) if k in order else len(order), str(k)))
+        for key in keys:
+            where = f"{path}.{key}" if path else str(key)
+            if key not in stored or key not in expected:
+                found.append(
+                    f"{where}: {'missing' if key not in stored else repr(stored[key])[:60]} stored, "
+                    f"{'missing' if key not in expected else repr(expected[key])[:60]} now"
+                )
+            else:
+                found.extend(_differences(stored[key], expected[key], where))
+        return found
+    if stored != expected:
+        return [f"{path}: {repr(stored)[:60]} stored, {repr(expected)[:60]} now"]
+    return []
+
+
+def _check_identity(stored: dict[str, Any], expected: dict[str, Any], what: Path) -> None:
+    differences = _differences(stored.get("identity", {"format": 1}), expected)
+    if differences:
+        shown = "; ".join(differences[:4]) + (f"; and {len(differences) - 4} more" if len(differences) > 4 else "")
+        raise RunMismatchError(
+            f"{what} belongs to another run with the same id ({shown}). Use another output folder "
+            f"or delete {what.parent} to run this one"
+        )
+
+
+def load_result(out: str | Path, spec: RunSpec, identity: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    """
+    The stored result of a finished run, checked against the run's identity.
+
+    :param out: output folder
+    :param spec: the run
+    :param identity: the run's :func:`run_identity` (None: computed here)
+    :return: the result, or None when the run has not finished
+    :raises RunMismatchError: the stored result is another run's (another budget, scenario, hyperparameters ...)
+    """
     path = result_path(out, spec)
-    return json.loads(path.read_text()) if path.exists() else None
+    if not path.exists():
+        return None
+    result = json.loads(path.read_text())
+    _check_identity(result, run_identity(spec) if identity is None else identity, path)
+    return result
+
+
+@contextlib.contextmanager
+def output_lock(out: str | Path, name: str = ".lock") -> Iterator[Path]:
+    """
+    Hold the lock of an output folder for the duration of a job (an OS file lock: released when the process
+    ends, even when killed).
+
+    :param out: the folder
+    :param name: the lock file's name in it
+    :raises OutputBusyError: another process holds it
+    """
+    from filelock import FileLock, Timeout
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / name
+    lock = FileLock(path, timeout=0)
+    try:
+        lock.acquire()
+    except Timeout:
+        raise OutputBusyError(
+            f"{out} is in use by another job (lock {path}); wait for it to end, or use another output folder"
+        ) from None
+    try:
+        yield path
+    finally:
+        lock.release()
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=1, default=_json_default))
-    os.replace(tmp, path)  # atomic: a result file is complete or absent
+    text = json.dumps(data, indent=1, default=_json_default)
+    atomic_write(path, lambda tmp: Path(tmp).write_text(text))  # a result file is complete or absent
 
 
 def _json_default(value: Any) -> Any:
@@ -192,9 +340,9 @@ class EpisodeReturnLogger(BaseCallback):
     episode gets its own point, unlike SB3's ``rollout/ep_rew_mean`` (a mean over 100 episodes).
     """
 
-    def __init__(self, verbose: int = 0) -> None:
+    def __init__(self, verbose: int = 0, start: int = 0) -> None:
         super().__init__(verbose)
-        self.n_episodes = 0
+        self.n_episodes = start
 
     def _on_step(self) -> bool:
         for info in self.locals["infos"]:
@@ -205,18 +353,117 @@ class EpisodeReturnLogger(BaseCallback):
         return True
 
 
-def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str, Any]:
+class PeriodicCheckpoint(BaseCallback):
+    """
+    Save the model and its replay buffer every ``every`` episodes (at the end of the rollout in which the
+    episode ended, so the buffer holds its last transition), for :func:`run_one` to resume from.
+
+    :param run_dir: the run's folder (``checkpoint.json`` and ``checkpoints/`` are written there)
+    :param every: episodes between checkpoints
+    :param identity: the run's :func:`run_identity`, stored with each checkpoint
+    :param start: episodes already trained (a resumed run)
+    """
+
+    def __init__(self, run_dir: Path, every: int, identity: dict[str, Any], start: int = 0) -> None:
+        super().__init__()
+        self.run_dir, self.every, self.identity = run_dir, every, identity
+        self.n_episodes, self._due = start, False
+
+    def _on_step(self) -> bool:
+        for info in self.locals["infos"]:
+            if "episode" in info:
+                self.n_episodes += 1
+                self._due = self._due or self.n_episodes % self.every == 0
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self._due:
+            self._due = False
+            save_checkpoint(self.model, self.run_dir, self.identity, self.n_episodes)
+
+
+def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episodes: int) -> Path:
+    """
+    Write a checkpoint: model and replay buffer into a fresh ``checkpoints/<episodes>`` folder, then
+    ``checkpoint.json`` (atomically) pointing at it, then remove the older folders. A kill at any point leaves
+    the previous checkpoint usable.
+
+    :return: the checkpoint folder
+    """
+    folder = run_dir / "checkpoints" / f"episode_{episodes}"
+    shutil.rmtree(folder, ignore_errors=True)
+    atomic_write(folder / "model.zip", model.save)
+    if getattr(model, "replay_buffer", None) is not None:
+        atomic_write(folder / "replay_buffer.pkl", model.save_replay_buffer)
+    pointer = {
+        "identity": identity,
+        "episodes": episodes,
+        "timesteps": int(model.num_timesteps),
+        "folder": str(folder.relative_to(run_dir)),
+    }
+    _write_json(run_dir / "checkpoint.json", pointer)
+    for other in (run_dir / "checkpoints").iterdir():
+        if other != folder:
+            shutil.rmtree(other, ignore_errors=True)
+    return folder
+
+
+def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    """
+    The latest checkpoint of a run, checked against the run's identity.
+
+    :param run_dir: the run's folder
+    :param identity: the run's :func:`run_identity` (None: not checked)
+    :return: ``checkpoint.json``'s content plus ``path`` (the folder), or None when there is none
+    :raises RunMismatchError: the checkpoint is another run's
+    """
+    run_dir = Path(run_dir)
+    pointer = run_dir / "checkpoint.json"
+    if not pointer.exists():
+        return None
+    checkpoint = json.loads(pointer.read_text())
+    if identity is not None:
+        _check_identity(checkpoint, identity, pointer)
+    checkpoint["path"] = run_dir / checkpoint["folder"]
+    return checkpoint if (checkpoint["path"] / "model.zip").exists() else None
+
+
+def run_one(
+    spec: RunSpec,
+    out: str | Path,
+    n_trajectories: int = 3,
+    *,
+    tensorboard_dir: str | Path | None = None,
+    checkpoint_every: int | None = None,
+    resume: bool = False,
+    threads: int | None = 1,
+    progress_bar: bool = False,
+    verbose: int = 0,
+) -> dict[str, Any]:
     """
     Train, save and evaluate one run; the result is written to :func:`result_path` last.
 
-    The model trains for ``spec.episodes`` episodes (``StopTrainingOnMaxEpisodes``), logging to TensorBoard
-    in ``<out>/tb/<run_id>`` (SB3's scalars and the ``mission/*`` ones). DT-DPG also saves its network at
-    the end of the destination phase (the paper's theta_X), which is evaluated too ("before transfer").
+    The model trains for ``spec.episodes`` episodes (``StopTrainingOnMaxEpisodes``; or ``spec.timesteps``
+    timesteps), logging to TensorBoard in ``<tensorboard_dir>/<run_id>`` (SB3's scalars and the ``mission/*``
+    ones). DT-DPG also saves its network at the end of the destination phase (the paper's theta_X), which is
+    evaluated too ("before transfer").
+
+    Without ``resume``, leftovers of an interrupted attempt are removed and the run starts afresh (so that a
+    run's result depends on its seed only). With ``resume``, a finished run's result is returned as is and an
+    interrupted one continues from its last checkpoint (model, replay buffer, action noise and curriculum
+    state; not the environment's random state, so a resumed run is not bit-identical to an uninterrupted one).
 
     :param spec: the run
     :param out: output folder
     :param n_trajectories: how many test episodes' trajectories to keep in the result
+    :param tensorboard_dir: TensorBoard root folder (None: ``<out>/tb``)
+    :param checkpoint_every: save a checkpoint every this many episodes (None: none)
+    :param resume: reuse a finished result or the last checkpoint (both checked against :func:`run_identity`)
+    :param threads: torch threads (None: torch's default; 1 in parallel workers)
+    :param progress_bar: show SB3's progress bar
+    :param verbose: SB3 verbosity
     :return: the result (as written)
+    :raises RunMismatchError: with ``resume``, a stored result or checkpoint is another run's
     """
     import torch as th
     from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
@@ -226,38 +473,69 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
     from sb3_dtdpg.baselines import algorithm_class, make_env, make_model, mission_callbacks
     from sb3_dtdpg.evaluation import evaluate
 
-    th.set_num_threads(1)  # one core per run: runs are parallel across processes
+    if threads is not None:
+        th.set_num_threads(threads)  # one core per run: runs are parallel across processes
     out = Path(out)
     run_dir = out / "runs" / spec.run_id
-    # Leftovers of an interrupted attempt (no result file): start afresh, or TensorBoard would show both.
-    for folder in (run_dir, out / "tb" / spec.run_id):
-        shutil.rmtree(folder, ignore_errors=True)
+    tb_dir = (out / "tb" if tensorboard_dir is None else Path(tensorboard_dir)) / spec.run_id
+    identity = run_identity(spec)
+    checkpoint = None
+    if resume:
+        finished = load_result(out, spec, identity)
+        if finished is not None:
+            return finished
+        checkpoint = read_checkpoint(run_dir, identity)
+    if checkpoint is None:
+        # Leftovers of an interrupted attempt (no result file): start afresh, or TensorBoard would show both.
+        for folder in (run_dir, tb_dir):
+            shutil.rmtree(folder, ignore_errors=True)
+    remove_temp_files(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
-    destination_episodes = None
-    if spec.algo == "dtdpg":
-        destination_episodes = spec.destination_episodes or max(1, round(0.6 * spec.episodes))
-    model = make_model(
-        spec.algo,
-        env,
-        seed=spec.seed,
-        learning_rate=spec.learning_rate,
-        destination_episodes=destination_episodes,
-        hyperparams=spec.hyperparams,
-        **({"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}),
-    )
+    done_episodes = 0
+    if checkpoint is not None:
+        model = algorithm_class(spec.algo).load(checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose)
+        if (checkpoint["path"] / "replay_buffer.pkl").exists():
+            model.load_replay_buffer(checkpoint["path"] / "replay_buffer.pkl")
+        done_episodes = int(checkpoint["episodes"])
+    else:
+        destination_episodes = None
+        if spec.algo == "dtdpg":
+            destination_episodes = spec.destination_episodes or max(1, round(0.6 * spec.episodes))
+        model = make_model(
+            spec.algo,
+            env,
+            seed=spec.seed,
+            learning_rate=spec.learning_rate,
+            destination_episodes=destination_episodes,
+            hyperparams=spec.hyperparams,
+            verbose=verbose,
+            **({"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}),
+        )
     # A logger of our own, so that the TensorBoard folder is exactly tb/<run_id> (SB3 would append "_1").
-    model.set_logger(configure(str(out / "tb" / spec.run_id), ["tensorboard", "csv"]))
+    model.set_logger(configure(str(tb_dir), ["tensorboard", "csv", *(["stdout"] if verbose else [])]))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
-    stop = StopTrainingOnMaxEpisodes(spec.episodes)
+    episode_logger = EpisodeReturnLogger(start=done_episodes)
+    callbacks: list[BaseCallback] = [episode_logger, *mission_callbacks(model)]
+    if spec.timesteps is None:
+        remaining = spec.episodes - done_episodes
+        total_timesteps = remaining * max_steps
+        callbacks.insert(0, StopTrainingOnMaxEpisodes(remaining))
+    else:
+        total_timesteps = spec.timesteps - model.num_timesteps
+    if checkpoint_every:
+        callbacks.append(PeriodicCheckpoint(run_dir, checkpoint_every, identity, start=done_episodes))
     start = time.perf_counter()
-    model.learn(
-        total_timesteps=spec.episodes * max_steps,
-        callback=[stop, EpisodeReturnLogger(), *mission_callbacks(model)],
-        log_interval=1,
-    )
+    if total_timesteps > 0:
+        model.learn(
+            total_timesteps=total_timesteps,
+            callback=callbacks,
+            log_interval=1,
+            reset_num_timesteps=checkpoint is None,
+            progress_bar=progress_bar,
+        )
     train_s = time.perf_counter() - start
-    model.save(run_dir / "model.zip")
+    atomic_write(run_dir / "model.zip", model.save)
     env.close()
 
     def _evaluate(policy: Any) -> Any:
@@ -273,12 +551,14 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
         )
 
     result: dict[str, Any] = {
+        "identity": identity,
         "spec": dataclasses.asdict(spec),
         "run_id": spec.run_id,
         "group": spec.group,
         "train": {
             "timesteps": int(model.num_timesteps),
-            "episodes": int(stop.n_episodes),
+            "episodes": int(episode_logger.n_episodes),
+            "resumed_at_episode": done_episodes if checkpoint is not None else None,
             "wall_s": train_s,
             "steps_per_s": model.num_timesteps / max(train_s, 1e-9),
         },
@@ -292,7 +572,43 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
         load_env.close()
     result["curriculum_state"] = getattr(model, "curriculum_state", None)
     _write_json(result_path(out, spec), result)
+    # The result supersedes the checkpoints (the replay buffer can be large).
+    (run_dir / "checkpoint.json").unlink(missing_ok=True)
+    shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)
     return result
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """
+    Worker initialiser: end this process when its parent ends, however it ends (SIGTERM, SIGKILL, a crash).
+    On Linux the kernel sends SIGKILL (``PR_SET_PDEATHSIG``); elsewhere a thread polls the parent's pid.
+    """
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
+    if os.getppid() != parent_pid:  # the parent ended before the line above
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def worker_pool(n_workers: int) -> ProcessPoolExecutor:
+    """
+    The process pool of :func:`run_many`: spawned processes (no state inherited from the parent) that end when
+    the parent process ends, so that killing a job never leaves workers running its queued runs.
+
+    :param n_workers: number of processes
+    :return: the executor
+    """
+    context = multiprocessing.get_context("spawn")
+    return ProcessPoolExecutor(
+        max_workers=n_workers, mp_context=context, initializer=_die_with_parent, initargs=(os.getpid(),)
+    )
 
 
 def _worker(spec: RunSpec, out: str) -> tuple[str, float]:
@@ -321,8 +637,9 @@ def run_many(
     """
     Run the unfinished runs of ``specs`` in parallel worker processes (spawned, one torch thread each).
 
-    Runs whose result file exists are skipped (resumable). Each run writes its files as soon as it ends,
-    so an interruption loses only the runs in progress.
+    Runs whose result file exists are skipped (resumable), after checking that the stored result is this run's
+    (:func:`run_identity`). Each run writes its files as soon as it ends, so an interruption loses only the
+    runs in progress (they start afresh next time). Hold :func:`output_lock` around a job that calls this.
 
     :param specs: the runs
     :param out: output folder
@@ -330,13 +647,14 @@ def run_many(
     :param progress: show a progress bar
     :param on_finish: called with each run id as it finishes
     :return: the report
+    :raises RunMismatchError: a stored result is another run's (checked for every run before any starts)
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     report = RunReport()
     todo: list[RunSpec] = []
     for spec in specs:
-        if result_path(out, spec).exists():
+        if load_result(out, spec) is not None:
             report.skipped.append(spec.run_id)
         else:
             todo.append(spec)
@@ -352,8 +670,7 @@ def run_many(
     with Progress(*columns, disable=not progress) as bar:
         task = bar.add_task("", total=len(todo))
         if todo:
-            context = multiprocessing.get_context("spawn")
-            executor = ProcessPoolExecutor(max_workers=n_workers, mp_context=context)
+            executor = worker_pool(n_workers)
             try:
                 pending: dict[Future, RunSpec] = {executor.submit(_worker, spec, str(out)): spec for spec in todo}
                 while pending:

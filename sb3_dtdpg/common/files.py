@@ -1,0 +1,76 @@
+"""Writing output files safely: atomic replacement, leftover temporary files, file names from user text."""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+__all__ = ["TEMP_PREFIX", "atomic_write", "remove_temp_files", "safe_name"]
+
+#: Temporary files are named ``.<target>.<random>.tmp`` in the target's folder.
+TEMP_PREFIX = "."
+_TEMP_SUFFIX = ".tmp"
+
+
+def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> Path:
+    """
+    Write a file so that a reader sees either the old file or the complete new one, never a part.
+
+    ``write`` gets the path of a temporary file in the same folder (so that ``os.replace`` is an atomic
+    rename), which then replaces ``path``. On any error, including ``KeyboardInterrupt``, the temporary file is
+    removed; a process killed outright (SIGKILL, power loss) may leave one, which :func:`remove_temp_files`
+    removes later.
+
+    :param path: the target file
+    :param write: writes the content to the path it is given (e.g. ``model.save``); the path ends in ``.tmp``,
+        so SB3's ``save`` keeps it as it is
+    :return: the target path
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f"{TEMP_PREFIX}{path.name}.", suffix=_TEMP_SUFFIX, dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def remove_temp_files(folder: str | os.PathLike[str]) -> list[Path]:
+    """
+    Remove the temporary files that :func:`atomic_write` left in a folder (not recursive) when a process was killed.
+
+    :param folder: the folder (missing: nothing to do)
+    :return: the removed files
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    removed = []
+    for entry in folder.iterdir():
+        if entry.name.startswith(TEMP_PREFIX) and entry.name.endswith(_TEMP_SUFFIX) and entry.is_file():
+            entry.unlink(missing_ok=True)
+            removed.append(entry)
+    return removed
+
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._+-]+")
+
+
+def safe_name(text: str, max_chars: int = 80) -> str:
+    """
+    A file-name component made from user text (e.g. a scenario name): separators, ``..``, control and other
+    special characters become ``_``, so the result never leaves the folder it is joined to.
+
+    :param text: the text
+    :param max_chars: longest result
+    :return: a non-empty name of letters, digits and ``._+-``, not starting with a dot
+    """
+    name = re.sub(r"_+", "_", _UNSAFE.sub("_", text).replace("..", "_")).lstrip(".")[:max_chars]
+    return name or "_"

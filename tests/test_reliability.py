@@ -1,0 +1,302 @@
+"""Results never mixed up, jobs never overlapping, workers never orphaned, train resumable, temp files removed."""
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+import yaml
+
+from noma_radiomap import load_scenario
+from sb3_dtdpg.cli import main
+from sb3_dtdpg.common.files import atomic_write, remove_temp_files, safe_name
+from sb3_dtdpg.experiments import runs
+from sb3_dtdpg.experiments.compare import compare_specs, run_compare
+from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
+from sb3_dtdpg.experiments.runs import (
+    BUDGETS,
+    OutputBusyError,
+    RunMismatchError,
+    RunSpec,
+    load_result,
+    output_lock,
+    result_path,
+    run_identity,
+    worker_pool,
+)
+
+pytestmark = pytest.mark.filterwarnings("ignore:The inplace keyword:DeprecationWarning", "ignore::FutureWarning")
+
+
+@pytest.fixture(autouse=True)
+def _agg_backend(monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+
+
+def _store(out, spec, identity=None, episodes=None):
+    """A finished-looking result file for a spec (nothing trained)."""
+    path = result_path(out, spec)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    result = {"spec": dataclasses.asdict(spec), "train": {"episodes": spec.episodes if episodes is None else episodes}}
+    if identity is not False:
+        result["identity"] = run_identity(spec) if identity is None else identity
+    path.write_text(json.dumps(result))
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- run identity
+def test_compare_refuses_a_folder_holding_another_budgets_runs(tmp_path):
+    """The issue's case: `compare --budget tiny` then `--budget default` into the same folder."""
+    for spec in compare_specs(BUDGETS["tiny"], 1):
+        _store(tmp_path, spec)
+    with pytest.raises(RunMismatchError, match=r"another run with the same id .*spec\.episodes: 20 stored, 50 now"):
+        run_compare(tmp_path, budget="default", seeds=1, progress=False)
+    assert not (tmp_path / "results.md").exists()
+
+
+def test_reproduce_reduced_and_small_are_told_apart_even_report_only(tmp_path):
+    reduced, small = BUDGETS["reduced"], BUDGETS["small"]
+    spec_reduced = reproduce_specs(reduced, 1)["table_ii"][0]
+    spec_small = reproduce_specs(small, 1)["table_ii"][0]
+    assert spec_reduced.run_id == spec_small.run_id  # same ids ...
+    assert run_identity(spec_reduced)["scenario"]["name"] == "small" != run_identity(spec_small)["scenario"]["name"]
+    for specs in reproduce_specs(reduced, 1).values():
+        for spec in specs:
+            _store(tmp_path, spec)
+    with pytest.raises(RunMismatchError, match=r"spec\.scenario: 'small' stored, None now; scenario\."):
+        run_reproduce(tmp_path, budget="small", seeds=1, progress=False, train=False)
+
+
+@pytest.mark.parametrize(
+    ("change", "pattern"),
+    [
+        (lambda spec: dataclasses.replace(spec, episodes=1), r"spec\.episodes: 1 stored, 3 now"),
+        (lambda spec: dataclasses.replace(spec, eval_episodes=9), r"spec\.eval_episodes: 9 stored"),
+        (lambda spec: dataclasses.replace(spec, scenario="mall"), r"spec\.scenario: 'mall' stored, 'small' now"),
+        (lambda spec: dataclasses.replace(spec, inducing="geodesic"), r"spec\.inducing: 'geodesic' stored, None now"),
+    ],
+)
+def test_a_result_of_another_run_is_refused(tmp_path, change, pattern):
+    spec = compare_specs(BUDGETS["_micro"], 1)[0]
+    _store(tmp_path, spec, identity=run_identity(change(spec)))
+    with pytest.raises(RunMismatchError, match=pattern):
+        load_result(tmp_path, spec)
+
+
+def test_results_without_identity_or_of_older_format_are_refused(tmp_path):
+    spec = compare_specs(BUDGETS["_micro"], 1)[0]
+    _store(tmp_path, spec, identity=False)
+    with pytest.raises(RunMismatchError, match=r"format: 1 stored, 2 now"):
+        load_result(tmp_path, spec)
+
+
+def test_hyperparameters_and_scenario_content_are_part_of_the_identity(tmp_path, monkeypatch):
+    from sb3_dtdpg import baselines
+
+    spec = RunSpec("ddpg", "noma", 0, 3, scenario="small", hyperparams="tuned")
+    before = run_identity(spec)
+    monkeypatch.setitem(baselines.TUNED_KWARGS, "gamma", 0.9)
+    assert run_identity(spec)["hyperparameters"]["gamma"] == 0.9 != before["hyperparameters"]["gamma"]
+    # A scenario file edited since the run: same path, other content.
+    path = tmp_path / "office.yaml"
+    data = load_scenario("small").to_dict()
+    path.write_text(yaml.safe_dump(data))
+    file_spec = RunSpec("ddpg", "noma", 0, 3, scenario=str(path))
+    _store(tmp_path / "out", file_spec)
+    assert load_result(tmp_path / "out", file_spec) is not None
+    data["ap"]["max_power_dbm"] = 10.0
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(RunMismatchError, match=r"scenario\.ap\.max_power_dbm: 20\.0 stored, 10\.0 now"):
+        load_result(tmp_path / "out", file_spec)
+
+
+# ---------------------------------------------------------------------------------------------- locks
+def test_a_second_job_on_a_busy_folder_is_refused(tmp_path):
+    with output_lock(tmp_path):
+        with pytest.raises(OutputBusyError, match="in use by another job"):
+            run_compare(tmp_path, budget="_micro", seeds=1, progress=False)
+        with pytest.raises(OutputBusyError):
+            run_reproduce(tmp_path, budget="_micro", seeds=1, progress=False, train=False)
+    with output_lock(tmp_path):  # released
+        pass
+
+
+def test_the_lock_of_a_killed_job_is_released(tmp_path):
+    code = f"from sb3_dtdpg.experiments.runs import output_lock\nwith output_lock({str(tmp_path)!r}):\n"
+    code += "    print('locked', flush=True)\n    import time; time.sleep(60)\n"
+    holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        with pytest.raises(OutputBusyError):
+            with output_lock(tmp_path):
+                pass
+    finally:
+        holder.kill()
+        holder.wait()
+    with output_lock(tmp_path):
+        pass
+
+
+# ---------------------------------------------------------------------------------------------- workers
+PARENT = textwrap.dedent(
+    """
+    import os, time
+    from sb3_dtdpg.experiments.runs import worker_pool
+
+    def pid_after(seconds):
+        time.sleep(seconds)
+        return os.getpid()
+
+    if __name__ == "__main__":
+        pool = worker_pool(2)
+        ready = set()
+        while len(ready) < 2:  # both workers started (their initialiser has run)
+            ready |= {f.result() for f in [pool.submit(pid_after, 1.0) for _ in range(2)]}
+        futures = [pool.submit(time.sleep, 120) for _ in range(4)]  # two running, two queued
+        time.sleep(0.5)
+        print(" ".join(str(pid) for pid in ready), flush=True)
+        time.sleep(120)
+    """
+)
+
+
+def _alive(pid):
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            return "\nState:\tZ" not in status.read()
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_workers_end_with_their_parent(tmp_path, sig):
+    script = tmp_path / "parent.py"
+    script.write_text(PARENT)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        workers = [int(pid) for pid in parent.stdout.readline().split()]
+        assert len(workers) == 2 and all(_alive(pid) for pid in workers)
+        parent.send_signal(sig)
+        parent.wait(timeout=10)
+        deadline = time.monotonic() + 10
+        while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(pid) for pid in workers)
+    finally:
+        parent.kill()
+
+
+def test_run_many_uses_the_pool_that_ends_with_its_parent():
+    pool = worker_pool(1)
+    try:
+        assert pool.submit(os.getppid).result() == os.getpid()
+        assert pool._initializer is runs._die_with_parent
+    finally:
+        pool.shutdown()
+
+
+# ---------------------------------------------------------------------------------------------- train
+TRAIN = ["train", "--scenario", "small", "--episodes", "4", "--checkpoint-every", "2", "--eval-episodes", "1"]
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "dtdpg"])
+def test_train_writes_checkpoints_and_resumes(tmp_path, monkeypatch, capsys, algo):
+    original = runs.PeriodicCheckpoint._on_rollout_end
+
+    def interrupt_after_first_checkpoint(self):
+        due = self._due
+        original(self)
+        if due:
+            raise KeyboardInterrupt
+
+    argv = [*TRAIN, "--algo", algo, "--out", str(tmp_path), "--tb", str(tmp_path / "tb"), "--no-progress"]
+    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_end", interrupt_after_first_checkpoint)
+    assert main(argv) == 130
+    message = capsys.readouterr().err
+    run_dir = tmp_path / "runs" / f"{algo}_noma_s0"
+    assert "the checkpoint after 2 episodes is in" in message and "run the same command again to resume" in message
+    checkpoint = json.loads((run_dir / "checkpoint.json").read_text())
+    assert checkpoint["episodes"] == 2 and checkpoint["timesteps"] >= 2
+    folder = run_dir / checkpoint["folder"]
+    assert (folder / "model.zip").stat().st_size > 0 and (folder / "replay_buffer.pkl").stat().st_size > 0
+    assert not result_path(tmp_path, RunSpec(algo, "noma", 0, 4)).exists()
+    stale = run_dir / ".model.zip.killed.tmp"  # what a write killed by SIGKILL leaves
+    stale.write_bytes(b"")
+
+    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_end", original)
+    assert main(argv) == 0
+    assert "resumed after episode 2" in capsys.readouterr().out
+    result = json.loads((run_dir / "result.json").read_text())
+    assert result["train"]["episodes"] == 4 and result["train"]["resumed_at_episode"] == 2
+    assert result["train"]["timesteps"] > checkpoint["timesteps"]
+    if algo == "dtdpg":
+        assert result["curriculum_state"]["phase_index"] == 1  # the transfer after episode 2 carried over
+    assert not stale.exists() and not (run_dir / "checkpoint.json").exists() and not (run_dir / "checkpoints").exists()
+    # Finished: the same command returns the result; other settings in the same folder are refused.
+    assert main(argv) == 0
+    with pytest.raises(RunMismatchError, match=r"spec\.episodes: 4 stored, 5 now"):
+        main([*argv, "--episodes", "5"])
+
+
+# ---------------------------------------------------------------------------------------------- files
+def test_atomic_write_leaves_no_temp_file_when_interrupted(tmp_path):
+    target = tmp_path / "model.zip"
+    target.write_bytes(b"old")
+
+    def killed(path):
+        with open(path, "wb") as file:
+            file.write(b"par")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write(target, killed)
+    assert target.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == ["model.zip"]
+    atomic_write(target, lambda path: open(path, "wb").write(b"new"))
+    assert target.read_bytes() == b"new" and sorted(p.name for p in tmp_path.iterdir()) == ["model.zip"]
+
+
+def test_remove_temp_files_keeps_everything_else(tmp_path):
+    for name in (".result.json.abc.tmp", ".model.zip.x1.tmp", "model.zip", ".hidden", "notes.tmp"):
+        (tmp_path / name).write_bytes(b"")
+    removed = remove_temp_files(tmp_path)
+    assert sorted(p.name for p in removed) == [".model.zip.x1.tmp", ".result.json.abc.tmp"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".hidden", "model.zip", "notes.tmp"]
+
+
+@pytest.mark.parametrize(
+    ("name", "expected"),
+    [("x/../../escaped", "x_escaped"), ("..", "_"), ("/etc/passwd", "_etc_passwd"), ("a\\b:c", "a_b_c"), ("mall", "mall")],
+)
+def test_safe_name(name, expected):
+    assert safe_name(name) == expected
+
+
+def test_map_keeps_a_hostile_scenario_name_inside_out(tmp_path):
+    data = load_scenario("small").to_dict()
+    data["name"] = "x/../../escaped"
+    path = tmp_path / "evil.yaml"
+    path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "a" / "b" / "maps"
+    assert main(["map", "--scenario", str(path), "--out", str(out)]) == 0
+    assert [p.name for p in out.iterdir()] == ["maps_x_escaped.png"]
+    assert [p.parent for p in tmp_path.rglob("*.png")] == [out]
+
+
+def test_curriculum_checkpoints_leave_no_temp_files_and_clean_old_ones(tmp_path):
+    import gymnasium as gym
+
+    from sb3_dtdpg import DTDPG
+
+    stale = tmp_path / ".phase_0_destination.zip.killed.tmp"
+    stale.write_bytes(b"")  # a save killed by SIGKILL
+    env = gym.make("NomaRadioMap-v0", scenario="small")
+    model = DTDPG("MlpPolicy", env, learning_starts=10, curriculum_save_path=str(tmp_path), policy_kwargs={"net_arch": [8]})
+    model.learn(1)
+    assert not stale.exists()

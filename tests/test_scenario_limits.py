@@ -1,0 +1,175 @@
+"""Hostile scenarios: limits checked at load time, physical ranges, and YAML details (duplicates, typos, encodings)."""
+
+import copy
+import time
+
+import pytest
+import yaml
+
+from noma_radiomap import Scenario, load_scenario
+from noma_radiomap.scenario import MAX_GRID_CELLS, MAX_MESSAGE_CHARS, MAX_NESTING, MAX_SUBSTEPS
+
+
+@pytest.fixture(scope="module")
+def small_dict():
+    return load_scenario("small").to_dict()
+
+
+def _with(**changes):
+    """A mutation setting ``data[a][b] = value`` for each ``a__b=value`` (``a=value`` at the top)."""
+
+    def mutate(data):
+        for path, value in changes.items():
+            keys = path.split("__")
+            target = data
+            for key in keys[:-1]:
+                target = target[int(key)] if isinstance(target, list) else target[key]
+            target[keys[-1]] = value
+
+    return mutate
+
+
+# Each case: a mutation of `small` and the start of the error message (the field path and the value).
+HOSTILE = {
+    # item 4: inputs that would exhaust the machine
+    "1e8-cell grid": (_with(room__resolution=0.0012), r"room\.resolution: 0\.0012 gives 6\.67e\+07 cells"),
+    "subnormal resolution": (_with(room__resolution=5e-324), r"room\.resolution: 5e-324 gives inf cells"),
+    "huge room": (_with(room__width=1e7), r"room\.width: 10000000\.0 is outside the physical range"),
+    "one step never returns": (_with(robot__v_max=1e6 / 1e4, mission__time_step=3600), r"robot\.v_max: 100\.0 m/s x"),
+    "too many sub-steps": (_with(robot__v_max=99.0), rf"robot\.v_max: 99\.0 .* more than the limit of {MAX_SUBSTEPS}"),
+    "huge name": (_with(name="x" * 10_000), r"name: 10000 characters, more than the limit"),
+    "int beyond float": (_with(room__width=10**400), r"room\.width: .* out of range"),
+    "100k robots": (lambda d: d.__setitem__("robots", d["robots"] * 50_000), r"robots: 100000 entries, more than"),
+    # item 5: non-finite or absurd physics
+    "+400 dBm AP": (_with(ap__max_power_dbm=400.0), r"ap\.max_power_dbm: 400\.0 is outside the physical range"),
+    "-400 dBm AP": (_with(ap__max_power_dbm=-400.0), r"ap\.max_power_dbm: -400\.0 is outside"),
+    "+400 dBm interferer": (_with(interferers__0__power_dbm=400.0), r"interferers\[0\]\.power_dbm: 400\.0 is outside"),
+    "interferer 1e9 m away": (_with(interferers__0__position=[1e9, 0, 0]), r"interferers\[0\]\.position\[0\]: 1000000000"),
+    "huge bandwidth": (_with(radio__bandwidth_per_robot_hz=1e300), r"radio\.bandwidth_per_robot_hz: 1e\+300 is outside"),
+    "huge QoS rate": (_with(radio__qos_rate_bps=1e200), r"radio\.qos_rate_bps: 1e\+200 is outside"),
+    "noise above -100 dBm/Hz": (_with(radio__noise_dbm_per_hz=30.0), r"radio\.noise_dbm_per_hz: 30\.0 is outside"),
+    "1 Hz carrier": (_with(radio__frequency_mhz=1e-6), r"radio\.frequency_mhz: 1e-06 is outside"),
+    "1000 dB wall": (_with(radio__wall_loss_db=1000.0), r"radio\.wall_loss_db: 1000\.0 is outside"),
+    "huge NLoS coefficient": (_with(radio__nlos_distance_coefficient=1e5), r"radio\.nlos_distance_coefficient: 100000"),
+    "huge penalty": (_with(mission__outage_penalty=1e300), r"mission\.outage_penalty: 1e\+300 is outside"),
+    "huge t_total": (_with(mission__t_total=1e300), r"mission\.t_total: 1e\+300 is outside"),
+    "billion steps": (_with(mission__max_steps=10**9), r"mission\.max_steps: 1000000000 is outside"),
+    "day-long step": (_with(mission__time_step=86_400.0), r"mission\.time_step: 86400\.0 is outside"),
+    "antenna 100 m high": (_with(robot__antenna_height=100.0), r"robot\.antenna_height: 100\.0 is outside"),
+    "AP 100 m high": (_with(ap__position=[3.0, 4.0, 100.0]), r"ap\.position\[2\]: 100\.0 is outside"),
+    "body taller than antenna": (_with(robot__body_height=2.0), r"robot\.body_height: 2\.0 must be below robot\.antenna"),
+    "body as tall as antenna": (_with(robot__body_height=1.5), r"robot\.body_height: 1\.5 must be below"),
+    "rocket robot": (_with(robot__v_max=1e9), r"robot\.v_max: 1000000000\.0 is outside"),
+    # item 6: keys
+    "typo'd key": (
+        lambda d: d["radio"].__setitem__("wal_loss_db", d["radio"].pop("wall_loss_db")),
+        r"radio\.wal_loss_db: unknown key \(did you mean 'wall_loss_db'\?\)",
+    ),
+    "typo'd section": (lambda d: d.__setitem__("robto", d.pop("robot")), r"robto: unknown key \(did you mean 'robot'\?\)"),
+    "non-string key": (_with(room__3=1.0), r"room\.3: unknown key"),
+}
+
+
+@pytest.mark.parametrize("case", list(HOSTILE))
+def test_hostile_scenario_gives_a_named_error_fast(case, small_dict):
+    mutate, pattern = HOSTILE[case]
+    data = copy.deepcopy(small_dict)
+    mutate(data)
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=pattern) as error:
+        Scenario.from_dict(data)
+    assert time.perf_counter() - start < 2.0
+    assert len(str(error.value)) < 4 * MAX_MESSAGE_CHARS + 300
+
+
+def test_limits_are_generous_for_real_rooms(small_dict):
+    data = copy.deepcopy(small_dict)
+    data["room"]["resolution"] = 0.25  # 48 x 32 cells, 2 sub-steps at v_max 1
+    assert Scenario.from_dict(data).room.shape == (48, 32)
+    assert 110 * 60 < MAX_GRID_CELLS
+
+
+def _write(tmp_path, text, name="s.yaml"):
+    path = tmp_path / name
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    return path
+
+
+@pytest.fixture
+def small_yaml(small_dict):
+    return yaml.safe_dump(small_dict, sort_keys=False)
+
+
+def test_duplicate_keys_are_errors(tmp_path, small_yaml):
+    text = small_yaml.replace("resolution: 0.5", "resolution: 0.5\n  resolution: 0.25", 1)
+    path = _write(tmp_path, text)
+    with pytest.raises(ValueError, match=rf"{path}, line \d+, column \d+: malformed YAML: duplicate key 'resolution' \(first"):
+        load_scenario(path)
+    top = _write(tmp_path, small_yaml + "name: other\n", "top.yaml")
+    with pytest.raises(ValueError, match=r"duplicate key 'name' \(first at line 1\)"):
+        load_scenario(top)
+
+
+def test_typo_in_a_file_is_reported_as_unknown_with_a_suggestion(tmp_path, small_yaml):
+    path = _write(tmp_path, small_yaml.replace("wall_loss_db:", "wal_loss_db:", 1))
+    with pytest.raises(ValueError, match=rf"{path}: radio\.wal_loss_db: unknown key \(did you mean 'wall_loss_db'\?\)"):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "value"),
+    [("15e3", 15_000.0), ("1.5E4", 15_000.0), ("+15e+3", 15_000.0), ("150e2", 15_000.0), ("1.5e4", 15_000.0)],
+)
+def test_exponent_numbers_are_numbers(tmp_path, small_yaml, text, value):
+    path = _write(tmp_path, small_yaml.replace("bandwidth_per_robot_hz: 15000.0", f"bandwidth_per_robot_hz: {text}", 1))
+    assert load_scenario(path).radio.bandwidth_per_robot_hz == value
+
+
+def test_exponent_speed_is_a_number_then_range_checked(tmp_path, small_yaml):
+    path = _write(tmp_path, small_yaml.replace("v_max: 1.0", "v_max: 1.0e9", 1))
+    with pytest.raises(ValueError, match=r"robot\.v_max: 1000000000\.0 is outside the physical range"):
+        load_scenario(path)
+
+
+HOSTILE_FILES = {
+    "latin-1": (b"name: caf\xe9\n", r"not a UTF-8 text file \(byte 9"),
+    "utf-16": ("name: small\n".encode("utf-16"), r"not a UTF-8 text file"),
+    "binary": (bytes(range(256)), r"not a UTF-8 text file"),
+    "deep lists": ("name: " + "[" * 100_000 + "]" * 100_000, rf"nesting deeper than the limit of {MAX_NESTING}"),
+    "deep mappings": ("".join(" " * k + f"k{k}:\n" for k in range(200)) + " " * 200 + "x: 1\n", r"nesting deeper"),
+    "huge file": ("# " + "x" * 5_000_000 + "\n", r"bytes, more than the limit"),
+    "malformed": ("name: [\n", r"line \d+, column \d+: malformed YAML"),
+    "unhashable key": ("? [1, 2]\n: 3\n", r"malformed YAML"),
+    "python tag": ("name: !!python/object/apply:os.system [echo hi]\n", r"malformed YAML"),
+    "a list": ("- 1\n- 2\n", r"scenario: expected a mapping"),
+    "empty": ("", r"scenario: expected a mapping, got None"),
+}
+
+
+@pytest.mark.parametrize("case", list(HOSTILE_FILES))
+def test_hostile_file_gives_a_value_error_naming_the_file(tmp_path, case):
+    content, pattern = HOSTILE_FILES[case]
+    path = _write(tmp_path, content)
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=pattern) as error:
+        load_scenario(path)
+    assert str(error.value).startswith(str(path))
+    assert len(str(error.value)) < 1000
+    assert time.perf_counter() - start < 5.0
+
+
+def test_alias_bomb_in_a_name_is_reported_at_once(tmp_path, small_yaml):
+    # 9**9 strings once expanded: printing the value in full would never end
+    bomb = "name: [&a [x, x, x, x, x, x, x, x, x], " + ", ".join(
+        f"&{chr(98 + k)} [{', '.join(['*' + chr(97 + k)] * 9)}]" for k in range(8)
+    )
+    path = _write(tmp_path, small_yaml.replace("name: small", bomb + "]", 1))
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=rf"{path}: name: expected a non-empty string, got \[\[") as error:
+        load_scenario(path)
+    assert time.perf_counter() - start < 2.0 and len(str(error.value)) < 1000
+
+
+def test_unreadable_path_is_a_value_error(tmp_path):
+    with pytest.raises(ValueError, match="unknown built-in name and no such file"):
+        load_scenario(tmp_path / "missing.yaml")
