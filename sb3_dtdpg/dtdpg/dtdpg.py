@@ -16,7 +16,7 @@ from sb3_dtdpg.common.buffers import reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback, MissionLoggerCallback
 from sb3_dtdpg.common.noise import LinearDecayOUNoise
 from sb3_dtdpg.common.phases import Phase, default_phases, parse_phases, single_phase
-from sb3_dtdpg.dtdpg.policies import DTDPGPolicy, MlpPolicy
+from sb3_dtdpg.dtdpg.policies import CnnPolicy, DTDPGPolicy, MlpPolicy, MultiInputPolicy
 
 SelfDTDPG = TypeVar("SelfDTDPG", bound="DTDPG")
 
@@ -41,7 +41,8 @@ class DTDPG(DDPG):
     layers of 64-128 units, OU scale 0.5 then 0.4), except ``gamma``: the paper's ``gamma = 1`` is only
     stable with episodes that always end; 0.99 is the default.
 
-    :param policy: The policy model to use (``"MlpPolicy"``: the batch-norm policy)
+    :param policy: The policy model to use (``"MlpPolicy"``, ``"CnnPolicy"`` for images, ``"MultiInputPolicy"`` for
+        ``Dict`` observations: the batch-norm policy with a flatten, CNN or combined features extractor)
     :param env: The environment to learn from (if registered in Gym, can be str)
     :param learning_rate: learning rate for adam optimizer,
         the same learning rate will be used for all networks (Q-Values, Actor and Value function)
@@ -88,7 +89,11 @@ class DTDPG(DDPG):
     :param _init_setup_model: Whether or not to build the network at the creation of the instance
     """
 
-    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "CnnPolicy": CnnPolicy,
+        "MultiInputPolicy": MultiInputPolicy,
+    }
     policy: DTDPGPolicy
 
     def __init__(
