@@ -360,7 +360,8 @@ class CnnPolicy(DTDPGPolicy):
     :param lr_schedule: Learning rate schedule (could be constant)
     :param net_arch: The specification of the policy and value networks (default: ``[128, 64]``)
     :param features_extractor_class: Features extractor to use.
-    :param kwargs: The other arguments of :class:`DTDPGPolicy`
+    :param kwargs: The other arguments of :class:`DTDPGPolicy`, by keyword (``activation_fn``,
+        ``features_extractor_kwargs``, ``normalize_images``, ..., ``actor_norm``, ``critic_norm``)
     """
 
     def __init__(
@@ -369,6 +370,7 @@ class CnnPolicy(DTDPGPolicy):
         action_space: spaces.Box,
         lr_schedule: Schedule,
         net_arch: list[int] | dict[str, list[int]] | None = None,
+        *,
         features_extractor_class: type[BaseFeaturesExtractor] = NatureCNN,
         **kwargs: Any,
     ):
@@ -394,7 +396,8 @@ class MultiInputPolicy(DTDPGPolicy):
     :param lr_schedule: Learning rate schedule (could be constant)
     :param net_arch: The specification of the policy and value networks (default: ``[128, 64]``)
     :param features_extractor_class: Features extractor to use.
-    :param kwargs: The other arguments of :class:`DTDPGPolicy`
+    :param kwargs: The other arguments of :class:`DTDPGPolicy`, by keyword (``activation_fn``,
+        ``features_extractor_kwargs``, ``normalize_images``, ..., ``actor_norm``, ``critic_norm``)
     """
 
     def __init__(
@@ -403,6 +406,7 @@ class MultiInputPolicy(DTDPGPolicy):
         action_space: spaces.Box,
         lr_schedule: Schedule,
         net_arch: list[int] | dict[str, list[int]] | None = None,
+        *,
         features_extractor_class: type[BaseFeaturesExtractor] = CombinedExtractor,
         **kwargs: Any,
     ):
