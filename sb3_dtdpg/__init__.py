@@ -3,8 +3,17 @@
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
 from sb3_dtdpg.common.noise import LinearDecayOUNoise
 from sb3_dtdpg.common.phases import Phase
-from sb3_dtdpg.dtdpg import DTDPG, MlpPolicy
+from sb3_dtdpg.dtdpg import DTDPG, CnnPolicy, MlpPolicy, MultiInputPolicy
 
 __version__ = "0.1.0"
 
-__all__ = ["DTDPG", "CurriculumTransferCallback", "LinearDecayOUNoise", "MlpPolicy", "Phase", "__version__"]
+__all__ = [
+    "DTDPG",
+    "CnnPolicy",
+    "CurriculumTransferCallback",
+    "LinearDecayOUNoise",
+    "MlpPolicy",
+    "MultiInputPolicy",
+    "Phase",
+    "__version__",
+]

@@ -15,7 +15,7 @@ from sb3_dtdpg.common.buffers import reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
 from sb3_dtdpg.common.noise import decaying_noise
 from sb3_dtdpg.common.phases import Phase, parse_phases
-from sb3_dtdpg.dtdpg.policies import DTDPGPolicy, MlpPolicy
+from sb3_dtdpg.dtdpg.policies import CnnPolicy, DTDPGPolicy, MlpPolicy, MultiInputPolicy
 from sb3_dtdpg.missions import MissionLoggerCallback, default_curriculum
 
 SelfDTDPG = TypeVar("SelfDTDPG", bound="DTDPG")
@@ -44,7 +44,8 @@ class DTDPG(DDPG):
     ``zoo_configs/dtdpg_paper.yml`` (``--hyperparams paper`` on the command line); with them DT-DPG learns
     nothing within the paper's 500 episodes on ``NomaRadioMap-v0``.
 
-    :param policy: The policy model to use (``"MlpPolicy"``: the batch-norm policy)
+    :param policy: The policy model to use (``"MlpPolicy"``, ``"CnnPolicy"`` for images, ``"MultiInputPolicy"`` for
+        ``Dict`` observations: the batch-norm policy with a flatten, CNN or combined features extractor)
     :param env: The environment to learn from (if registered in Gym, can be str)
     :param learning_rate: learning rate for adam optimizer,
         the same learning rate will be used for all networks (Q-Values, Actor and Value function)
@@ -91,7 +92,11 @@ class DTDPG(DDPG):
     :param _init_setup_model: Whether or not to build the network at the creation of the instance
     """
 
-    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "CnnPolicy": CnnPolicy,
+        "MultiInputPolicy": MultiInputPolicy,
+    }
     policy: DTDPGPolicy
 
     def __init__(

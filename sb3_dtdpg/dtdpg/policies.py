@@ -6,7 +6,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import ContinuousCritic
 from stable_baselines3.common.preprocessing import get_action_dim
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor, FlattenExtractor, NatureCNN
 from stable_baselines3.common.type_aliases import Schedule
 from stable_baselines3.td3.policies import Actor as TD3Actor
 from stable_baselines3.td3.policies import TD3Policy
@@ -347,3 +347,74 @@ class DTDPGPolicy(TD3Policy):
 
 
 MlpPolicy = DTDPGPolicy
+
+
+class CnnPolicy(DTDPGPolicy):
+    """
+    Policy class (actor and critic, with their targets) for DT-DPG on image observations: :class:`DTDPGPolicy`
+    with SB3's ``NatureCNN`` features extractor. The batch norms are those of :class:`DTDPGPolicy`: right before
+    the actor's ``tanh``, and separately on the critic's CNN features and the action.
+
+    :param observation_space: Observation space
+    :param action_space: Action space
+    :param lr_schedule: Learning rate schedule (could be constant)
+    :param net_arch: The specification of the policy and value networks (default: ``[128, 64]``)
+    :param features_extractor_class: Features extractor to use.
+    :param kwargs: The other arguments of :class:`DTDPGPolicy`, by keyword (``activation_fn``,
+        ``features_extractor_kwargs``, ``normalize_images``, ..., ``actor_norm``, ``critic_norm``)
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        lr_schedule: Schedule,
+        net_arch: list[int] | dict[str, list[int]] | None = None,
+        *,
+        features_extractor_class: type[BaseFeaturesExtractor] = NatureCNN,
+        **kwargs: Any,
+    ):
+        super().__init__(
+            observation_space,
+            action_space,
+            lr_schedule,
+            net_arch=net_arch,
+            features_extractor_class=features_extractor_class,
+            **kwargs,
+        )
+
+
+class MultiInputPolicy(DTDPGPolicy):
+    """
+    Policy class (actor and critic, with their targets) for DT-DPG on ``Dict`` observations (for instance goal envs
+    with ``HerReplayBuffer``): :class:`DTDPGPolicy` with SB3's ``CombinedExtractor`` (a ``NatureCNN`` per image key,
+    the other keys flattened, all concatenated). The batch norms are those of :class:`DTDPGPolicy`: right before
+    the actor's ``tanh``, and separately on the critic's combined features and the action.
+
+    :param observation_space: Observation space
+    :param action_space: Action space
+    :param lr_schedule: Learning rate schedule (could be constant)
+    :param net_arch: The specification of the policy and value networks (default: ``[128, 64]``)
+    :param features_extractor_class: Features extractor to use.
+    :param kwargs: The other arguments of :class:`DTDPGPolicy`, by keyword (``activation_fn``,
+        ``features_extractor_kwargs``, ``normalize_images``, ..., ``actor_norm``, ``critic_norm``)
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Dict,
+        action_space: spaces.Box,
+        lr_schedule: Schedule,
+        net_arch: list[int] | dict[str, list[int]] | None = None,
+        *,
+        features_extractor_class: type[BaseFeaturesExtractor] = CombinedExtractor,
+        **kwargs: Any,
+    ):
+        super().__init__(
+            observation_space,
+            action_space,
+            lr_schedule,
+            net_arch=net_arch,
+            features_extractor_class=features_extractor_class,
+            **kwargs,
+        )
