@@ -1,10 +1,18 @@
 """sb3-dtdpg: DT-DPG (deep transfer deterministic policy gradient) for Stable-Baselines3."""
 
-from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
+from sb3_dtdpg.common.callbacks import CurriculumTransferCallback, MissionLoggerCallback
 from sb3_dtdpg.common.noise import LinearDecayOUNoise
 from sb3_dtdpg.common.phases import Phase
 from sb3_dtdpg.dtdpg import DTDPG, MlpPolicy
 
 __version__ = "0.1.0"
 
-__all__ = ["DTDPG", "CurriculumTransferCallback", "LinearDecayOUNoise", "MlpPolicy", "Phase", "__version__"]
+__all__ = [
+    "DTDPG",
+    "CurriculumTransferCallback",
+    "LinearDecayOUNoise",
+    "MissionLoggerCallback",
+    "MlpPolicy",
+    "Phase",
+    "__version__",
+]

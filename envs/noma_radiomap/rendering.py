@@ -36,7 +36,6 @@ def legend_below(ax: "Axes", extra: Any = (), ncol: int = 3) -> None:
     ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), borderaxespad=4.0, ncol=ncol, fontsize=8)
 
 
-
 def _marker_keys() -> list[Any]:
     """Legend keys (grey) for what every robot has in its own colour: position, destination, trail."""
     from matplotlib.lines import Line2D
