@@ -351,7 +351,8 @@ class MissionLoggerCallback(BaseCallback):
         from stable_baselines3 import DDPG
         from sb3_dtdpg import MissionLoggerCallback
 
-        model = DDPG("MlpPolicy", gym.make("NomaRadioMap-v0"), tensorboard_log="runs")
+        env = gym.make("NomaRadioMap-v0", reward_phase="combined")  # both phases' reward terms at once
+        model = DDPG("MlpPolicy", env, tensorboard_log="runs")
         model.learn(30_000, callback=MissionLoggerCallback(), log_interval=1, tb_log_name="ddpg")
 
     :param stats_window_size: Window of the success rate (None: the model's ``stats_window_size``).

@@ -30,6 +30,7 @@ EPISODES_TAG = "episode/number"
 #: Per-episode success (1: all robots arrived), logged by :class:`sb3_dtdpg.MissionLoggerCallback`.
 SUCCESS_TAG = "mission/success"
 _LOGGED_SUCCESS_RATE = "mission/success_rate"
+_PHASE_TAG = "curriculum/phase"
 
 
 #: Policy colours on the SINR map: none is the outage red, the obstacles' white or the interferers' orange.
@@ -77,10 +78,13 @@ def transfer_episode(log_dir: str | Path) -> float | None:
     :param log_dir: the run's TensorBoard folder
     :return: the episode count, or None when the run never transferred (or is not DT-DPG)
     """
-    curves = episode_curves(log_dir, ["curriculum/phase"])
-    if "curriculum/phase" not in curves:
+    return _transfer(episode_curves(log_dir, [_PHASE_TAG]))
+
+
+def _transfer(curves: pd.DataFrame) -> float | None:
+    if _PHASE_TAG not in curves:
         return None
-    later = curves.index[curves["curriculum/phase"].to_numpy() >= 1]
+    later = curves.index[curves[_PHASE_TAG].to_numpy() >= 1]
     return float(later[0]) if len(later) else None
 
 
@@ -97,15 +101,18 @@ def rolling_curve(log_dir: str | Path, tag: str, window: int) -> pd.Series:
     :param window: rolling window in episodes (1: no smoothing)
     :return: the curve indexed by the training episode (empty when the tag is absent)
     """
+    return _rolling(episode_curves(log_dir, [tag, _LOGGED_SUCCESS_RATE]), tag, window)[0]
+
+
+def _rolling(curves: pd.DataFrame, tag: str, window: int) -> tuple[pd.Series, bool]:
+    """:func:`rolling_curve` on a run's :func:`episode_curves`; also says whether it is a rate as logged."""
     if window < 1:
         raise ValueError(f"window must be a positive number of episodes, got {window!r}")
-    tags = [tag, _LOGGED_SUCCESS_RATE] if tag == SUCCESS_TAG else [tag]
-    curves = episode_curves(log_dir, tags)
-    if tag in curves and curves[tag].notna().any():
-        return curves[tag].dropna().rolling(window, min_periods=1).mean()
-    if tag == SUCCESS_TAG and _LOGGED_SUCCESS_RATE in curves:
-        return curves[_LOGGED_SUCCESS_RATE].dropna()
-    return pd.Series(dtype=float)
+    if tag != _LOGGED_SUCCESS_RATE and tag in curves and curves[tag].notna().any():
+        return curves[tag].dropna().rolling(window, min_periods=1).mean(), False
+    if tag in (SUCCESS_TAG, _LOGGED_SUCCESS_RATE) and _LOGGED_SUCCESS_RATE in curves:
+        return curves[_LOGGED_SUCCESS_RATE].dropna(), True
+    return pd.Series(dtype=float), False
 
 
 def _mean_band(curves: Sequence[pd.Series], n_points: int = 200) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -143,28 +150,33 @@ def plot_learning_curves(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator
 
     fig, axes = plt.subplots(1, len(tags), figsize=(6.0 * len(tags), 4.6), squeeze=False, layout="constrained")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     transfers = False
     as_logged: set[str] = set()
+    wanted = [*(tag for tag, _ in tags), _LOGGED_SUCCESS_RATE, _PHASE_TAG]
     for k, (label, dirs) in enumerate(groups.items()):
         colour = colours[k % len(colours)]
+        runs = [episode_curves(d, wanted) for d in dirs]  # each event file is read once
         for ax, (tag, _) in zip(axes[0], tags, strict=False):
-            series = [curve for curve in (rolling_curve(d, tag, smooth) for d in dirs) if len(curve)]
+            curves = [_rolling(run, tag, smooth) for run in runs]
+            series = [curve for curve, _ in curves if len(curve)]
             if not series:
                 continue
-            if tag == SUCCESS_TAG and not any(SUCCESS_TAG in episode_curves(d, [SUCCESS_TAG]) for d in dirs):
+            if any(logged for curve, logged in curves if len(curve)):
                 as_logged.add(tag)
             x, mean, low, high = _mean_band(series)
             ax.plot(x, mean, color=colour, label=f"{label} ({_count(len(series), 'seed')})")
             if len(series) > 1:
                 ax.fill_between(x, low, high, color=colour, alpha=0.2, lw=0)
-            for episode in filter(None, (transfer_episode(d) for d in dirs)):
+            for episode in filter(None, (_transfer(run) for run in runs)):
                 ax.axvline(episode, color=colour, ls=":", lw=0.8)
                 transfers = True
     for ax, (tag, ylabel) in zip(axes[0], tags, strict=False):
         ax.set_xlabel("training episode")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         if tag in as_logged:
             window = "as logged: MissionLoggerCallback's stats_window_size"
         elif smooth > 1:
@@ -262,7 +274,18 @@ def plot_trajectories(
         Line2D([], [], ls="none", marker="s", ms=5, color="0.6", mec="black", label="end of the episode"),
     ]
     if destinations is not None and any(g is not None for g in destinations.values()):
-        keys.append(Line2D([], [], ls="none", marker="X", ms=11, color="white", mec="black", label="destination"))
+        keys.append(
+            Line2D(
+                [],
+                [],
+                ls="none",
+                marker="X",
+                ms=11,
+                color="white",
+                mec="black",
+                label=f"destination (reached within {scenario.robot.arrival_radius:g} m)",
+            )
+        )
     handles = keys + map_handles
     fig.legend(
         handles, [h.get_label() for h in keys] + map_labels, loc="outside lower center", ncol=4, fontsize=8, frameon=False
