@@ -101,7 +101,7 @@ def rolling_curve(log_dir: str | Path, tag: str, window: int) -> pd.Series:
     :param window: rolling window in episodes (1: no smoothing)
     :return: the curve indexed by the training episode (empty when the tag is absent)
     """
-    return _rolling(episode_curves(log_dir, [tag, _LOGGED_SUCCESS_RATE]), tag, window)[0]
+    return _rolling(episode_curves(log_dir, list(dict.fromkeys([tag, _LOGGED_SUCCESS_RATE]))), tag, window)[0]
 
 
 def _rolling(curves: pd.DataFrame, tag: str, window: int) -> tuple[pd.Series, bool]:
@@ -156,7 +156,7 @@ def plot_learning_curves(
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     transfers = False
     as_logged: set[str] = set()
-    wanted = [*(tag for tag, _ in tags), _LOGGED_SUCCESS_RATE, _PHASE_TAG]
+    wanted = list(dict.fromkeys([*(tag for tag, _ in tags), _LOGGED_SUCCESS_RATE, _PHASE_TAG]))
     for k, (label, dirs) in enumerate(groups.items()):
         colour = colours[k % len(colours)]
         runs = [episode_curves(d, wanted) for d in dirs]  # each event file is read once
