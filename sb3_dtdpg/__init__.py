@@ -4,6 +4,7 @@ from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
 from sb3_dtdpg.common.noise import LinearDecayOUNoise
 from sb3_dtdpg.common.phases import Phase
 from sb3_dtdpg.dtdpg import DTDPG, CnnPolicy, MlpPolicy, MultiInputPolicy
+from sb3_dtdpg.missions import MissionLoggerCallback
 
 __version__ = "0.1.0"
 
@@ -12,6 +13,7 @@ __all__ = [
     "CnnPolicy",
     "CurriculumTransferCallback",
     "LinearDecayOUNoise",
+    "MissionLoggerCallback",
     "MlpPolicy",
     "MultiInputPolicy",
     "Phase",

@@ -74,9 +74,22 @@ class MissionLoggerCallback(BaseCallback):
     """
     Log the mission figures of finished episodes from the env's ``info`` under ``mission/``:
     ``success_rate`` (over the last ``stats_window_size`` episodes, from ``is_success``), and the means over the
-    episodes since the last log dump of ``mqi``, ``outage_steps`` (summed over robots) and ``mission_time``
-    (the largest over robots: steps until the last robot arrived, ``max_steps`` if one never did).
+    episodes since the last log dump of ``success`` (1 when all robots arrived, the definition of the test
+    success rate), ``mqi``, ``outage_steps`` (summed over robots) and ``mission_time`` (the largest over
+    robots: steps until the last robot arrived, ``max_steps`` if one never did). With ``log_interval=1``
+    an off-policy algorithm dumps after every episode, so these are per-episode values.
     Keys absent from an env's infos are skipped.
+
+    :class:`~sb3_dtdpg.DTDPG` adds it by itself; any other SB3 algorithm gets the same scalars with::
+
+        import gymnasium as gym
+        import noma_radiomap  # registers the env ids
+        from stable_baselines3 import DDPG
+        from sb3_dtdpg import MissionLoggerCallback
+
+        env = gym.make("NomaRadioMap-v0", reward_phase="combined")  # both phases' reward terms at once
+        model = DDPG("MlpPolicy", env, tensorboard_log="runs")
+        model.learn(30_000, callback=MissionLoggerCallback(), log_interval=1, tb_log_name="ddpg")
 
     :param stats_window_size: Window of the success rate (None: the model's ``stats_window_size``).
     :param verbose: Verbosity level.
@@ -100,6 +113,7 @@ class MissionLoggerCallback(BaseCallback):
                 continue
             if "is_success" in info:
                 self.successes.append(bool(info["is_success"]))
+                self.logger.record_mean("mission/success", float(info["is_success"]))
                 self.logger.record("mission/success_rate", float(np.mean(self.successes)))
             if "mqi" in info:
                 self.logger.record_mean("mission/mqi", float(info["mqi"]))

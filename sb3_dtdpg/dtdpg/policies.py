@@ -358,7 +358,7 @@ class CnnPolicy(DTDPGPolicy):
     :param observation_space: Observation space
     :param action_space: Action space
     :param lr_schedule: Learning rate schedule (could be constant)
-    :param net_arch: The specification of the policy and value networks (default: ``[128, 64]``)
+    :param net_arch: The specification of the policy and value networks (default: ``[128, 128]``)
     :param features_extractor_class: Features extractor to use.
     :param kwargs: The other arguments of :class:`DTDPGPolicy`, by keyword (``activation_fn``,
         ``features_extractor_kwargs``, ``normalize_images``, ..., ``actor_norm``, ``critic_norm``)
@@ -394,7 +394,7 @@ class MultiInputPolicy(DTDPGPolicy):
     :param observation_space: Observation space
     :param action_space: Action space
     :param lr_schedule: Learning rate schedule (could be constant)
-    :param net_arch: The specification of the policy and value networks (default: ``[128, 64]``)
+    :param net_arch: The specification of the policy and value networks (default: ``[128, 128]``)
     :param features_extractor_class: Features extractor to use.
     :param kwargs: The other arguments of :class:`DTDPGPolicy`, by keyword (``activation_fn``,
         ``features_extractor_kwargs``, ``normalize_images``, ..., ``actor_norm``, ``critic_norm``)

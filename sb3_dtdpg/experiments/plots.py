@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sb3_dtdpg.evaluation import mean_ci
+from sb3_dtdpg.experiments.aggregate import pointwise_bootstrap_ci
 
 __all__ = [
     "episode_curves",
@@ -21,11 +21,21 @@ __all__ = [
     "plot_learning_curves",
     "plot_trajectories",
     "read_scalars",
+    "rolling_curve",
     "transfer_episode",
 ]
 
 #: The episode count logged with every dump (by :class:`sb3_dtdpg.experiments.runs.EpisodeReturnLogger`).
 EPISODES_TAG = "episode/number"
+#: Per-episode success (1: all robots arrived), logged by :class:`sb3_dtdpg.MissionLoggerCallback`.
+SUCCESS_TAG = "mission/success"
+_LOGGED_SUCCESS_RATE = "mission/success_rate"
+_PHASE_TAG = "curriculum/phase"
+
+
+#: Policy colours on the SINR map: none is the outage red, the obstacles' white or the interferers' orange.
+_POLICY_COLOURS = ("#00e5ff", "#ff66ff", "#ffd700", "#7CFC00", "#1e90ff", "#ff1493")
+_ROBOT_STYLES = ("-", "--", ":", "-.")
 
 
 def read_scalars(log_dir: str | Path) -> pd.DataFrame:
@@ -68,40 +78,70 @@ def transfer_episode(log_dir: str | Path) -> float | None:
     :param log_dir: the run's TensorBoard folder
     :return: the episode count, or None when the run never transferred (or is not DT-DPG)
     """
-    curves = episode_curves(log_dir, ["curriculum/phase"])
-    if "curriculum/phase" not in curves:
+    return _transfer(episode_curves(log_dir, [_PHASE_TAG]))
+
+
+def _transfer(curves: pd.DataFrame) -> float | None:
+    if _PHASE_TAG not in curves:
         return None
-    later = curves.index[curves["curriculum/phase"].to_numpy() >= 1]
+    later = curves.index[curves[_PHASE_TAG].to_numpy() >= 1]
     return float(later[0]) if len(later) else None
 
 
-def _mean_band(curves: Sequence[pd.Series], n_points: int = 200) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean and 95 % CI across runs, after interpolating every run onto a common episode grid."""
+def rolling_curve(log_dir: str | Path, tag: str, window: int) -> pd.Series:
+    """
+    One run's curve as a learning-curve panel shows it: the per-episode values of ``tag`` and their plain
+    rolling mean over the last ``window`` episodes (fewer at the start). For the success panel
+    (:data:`SUCCESS_TAG`, 1 when all robots arrived) this is the share of successful episodes in the window:
+    the test table's success rate, on training episodes. A run logged before ``mission/success`` existed
+    falls back to ``mission/success_rate`` as logged (already a rolling rate, so it is not smoothed again).
+
+    :param log_dir: the run's TensorBoard folder
+    :param tag: the scalar tag
+    :param window: rolling window in episodes (1: no smoothing)
+    :return: the curve indexed by the training episode (empty when the tag is absent)
+    """
+    return _rolling(episode_curves(log_dir, list(dict.fromkeys([tag, _LOGGED_SUCCESS_RATE]))), tag, window)[0]
+
+
+def _rolling(curves: pd.DataFrame, tag: str, window: int) -> tuple[pd.Series, bool]:
+    """:func:`rolling_curve` on a run's :func:`episode_curves`; also says whether it is a rate as logged."""
+    if window < 1:
+        raise ValueError(f"window must be a positive number of episodes, got {window!r}")
+    if tag != _LOGGED_SUCCESS_RATE and tag in curves and curves[tag].notna().any():
+        return curves[tag].dropna().rolling(window, min_periods=1).mean(), False
+    if tag in (SUCCESS_TAG, _LOGGED_SUCCESS_RATE) and _LOGGED_SUCCESS_RATE in curves:
+        return curves[_LOGGED_SUCCESS_RATE].dropna(), True
+    return pd.Series(dtype=float), False
+
+
+def _mean_band(curves: Sequence[pd.Series], n_points: int = 200) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Mean and 95 % bootstrap CI across runs, after interpolating every run onto a common episode grid."""
     curves = [c.dropna() for c in curves if len(c.dropna())]
     end = min(float(c.index.max()) for c in curves)
     grid = np.linspace(min(float(c.index.min()) for c in curves), end, n_points)
     values = np.stack([np.interp(grid, c.index.to_numpy(dtype=float), c.to_numpy(dtype=float)) for c in curves])
-    stats = [mean_ci(values[:, k]) for k in range(values.shape[1])]
-    mean = np.array([s[0] for s in stats])
-    half = np.nan_to_num(np.array([s[1] for s in stats]))
-    return grid, mean, half
+    low, high = pointwise_bootstrap_ci(values)
+    return grid, values.mean(axis=0), low, high
 
 
 def plot_learning_curves(
     groups: Mapping[str, Sequence[str | Path]],
     path: str | Path,
-    tags: Sequence[tuple[str, str]] = (("mission/mqi", "MQI per episode"), ("mission/success_rate", "success rate")),
+    tags: Sequence[tuple[str, str]] = (("mission/mqi", "MQI"), (SUCCESS_TAG, "success rate")),
     smooth: int = 10,
     title: str | None = None,
 ) -> Any:
     """
-    Learning curves: for each group (e.g. ``dtdpg_noma``), the mean over its runs (seeds) and the 95 % CI
-    band, against the training episode; DT-DPG's transfer episodes are marked by dotted lines.
+    Learning curves: for each group (e.g. ``DT-DPG NOMA``), the mean over its runs (seeds) and a 95 %
+    percentile-bootstrap CI band over the runs, against the training episode; DT-DPG's transfer episodes
+    are marked by dotted lines. Each run's curve is the plain rolling mean of its per-episode values over
+    ``smooth`` episodes (:func:`rolling_curve`), and the y label says so.
 
     :param groups: group label -> the TensorBoard folders of its runs
     :param path: where to save the PNG
     :param tags: ``(tag, axis label)`` pairs, one panel each
-    :param smooth: rolling-mean window (episodes) applied to each run before averaging
+    :param smooth: rolling-mean window (episodes) of each run's curve
     :param title: figure title
     :return: the figure
     """
@@ -109,28 +149,57 @@ def plot_learning_curves(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator
 
-    fig, axes = plt.subplots(1, len(tags), figsize=(6.0 * len(tags), 4.0), squeeze=False)
+    fig, axes = plt.subplots(1, len(tags), figsize=(6.0 * len(tags), 4.6), squeeze=False, layout="constrained")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    transfers = False
+    as_logged: set[str] = set()
+    wanted = list(dict.fromkeys([*(tag for tag, _ in tags), _LOGGED_SUCCESS_RATE, _PHASE_TAG]))
     for k, (label, dirs) in enumerate(groups.items()):
         colour = colours[k % len(colours)]
-        per_run = [episode_curves(d, [t for t, _ in tags]) for d in dirs]
+        runs = [episode_curves(d, wanted) for d in dirs]  # each event file is read once
         for ax, (tag, _) in zip(axes[0], tags, strict=False):
-            series = [run[tag].rolling(smooth, min_periods=1).mean() for run in per_run if tag in run and len(run)]
+            curves = [_rolling(run, tag, smooth) for run in runs]
+            series = [curve for curve, _ in curves if len(curve)]
             if not series:
                 continue
-            x, mean, half = _mean_band(series)
-            ax.plot(x, mean, color=colour, label=f"{label} (n={len(series)})")
-            ax.fill_between(x, mean - half, mean + half, color=colour, alpha=0.2, lw=0)
-            for episode in filter(None, (transfer_episode(d) for d in dirs)):
+            if any(logged for curve, logged in curves if len(curve)):
+                as_logged.add(tag)
+            x, mean, low, high = _mean_band(series)
+            ax.plot(x, mean, color=colour, label=f"{label} ({_count(len(series), 'seed')})")
+            if len(series) > 1:
+                ax.fill_between(x, low, high, color=colour, alpha=0.2, lw=0)
+            for episode in filter(None, (_transfer(run) for run in runs)):
                 ax.axvline(episode, color=colour, ls=":", lw=0.8)
-    for ax, (_, ylabel) in zip(axes[0], tags, strict=False):
+                transfers = True
+    for ax, (tag, ylabel) in zip(axes[0], tags, strict=False):
         ax.set_xlabel("training episode")
-        ax.set_ylabel(ylabel)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        if tag in as_logged:
+            window = "as logged: MissionLoggerCallback's stats_window_size"
+        elif smooth > 1:
+            window = f"rolling mean over the last {smooth} training episodes"
+        else:
+            window = "per training episode"
+        ax.set_ylabel(f"{ylabel}\n({window})", fontsize=9)
+        if tag in (SUCCESS_TAG, _LOGGED_SUCCESS_RATE):
+            ax.set_ylim(-0.03, 1.03)
         ax.grid(alpha=0.3)
-    if axes[0][0].get_legend_handles_labels()[0]:
-        axes[0][0].legend(fontsize=8)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    if handles:
+        handles.append(Line2D([], [], color="0.3", lw=6, alpha=0.25))
+        labels.append("95 % bootstrap CI over seeds")
+        if transfers:
+            handles.append(Line2D([], [], color="0.3", ls=":", lw=0.8))
+            labels.append("transfer to the second phase (DT-DPG)")
+        fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 3), fontsize=8, frameon=False)
     return _save(fig, path, title)
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def episode_destinations(record: Mapping[str, Any]) -> np.ndarray | None:
@@ -150,8 +219,10 @@ def plot_trajectories(
     destinations: Mapping[str, np.ndarray | None] | None = None,
 ) -> Any:
     """
-    Trajectories on the SINR map, one panel per key of ``panels`` (e.g. NOMA / OMA). Starts are circles,
-    end points squares, destinations white crosses; robot 0 is drawn solid, the others dashed.
+    Trajectories on the SINR map, one panel per key of ``panels`` (e.g. NOMA / OMA): one colour per
+    policy, one line style per robot (robot 0 solid, robot 1 dashed, ...); starts are circles, end points
+    squares, destinations white crosses. One legend below the panels explains every colour, line style
+    and marker, the map's included.
 
     :param scenario: the scenario (name, path or :class:`noma_radiomap.Scenario`)
     :param panels: panel title -> (label -> trajectory of shape (steps + 1, U, 2))
@@ -164,6 +235,7 @@ def plot_trajectories(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     from noma_radiomap import RadioMap, load_scenario
 
@@ -171,36 +243,53 @@ def plot_trajectories(
     radio_map = RadioMap.for_scenario(scenario)
     room = scenario.room
     width = 7.0 * room.width / max(room.width, room.depth) + 1.5
-    fig, axes = plt.subplots(1, len(panels), figsize=(width * len(panels), 0.8 * width * room.depth / room.width + 1.2))
+    height = 0.8 * width * room.depth / room.width + 1.8
+    fig, axes = plt.subplots(1, len(panels), figsize=(width * len(panels), height), layout="constrained")
     axes = np.atleast_1d(axes)
-    colours = ["#ffffff", "#00e5ff", "#ff66ff", "#ffd700", "#7CFC00", "#ff8c00"]  # red is the map's outage contour
+    policies: dict[str, str] = {}
+    n_robots = 0
     for ax, (panel, trajectories) in zip(axes, panels.items(), strict=False):
-        radio_map.plot(ax=ax, kind="sinr", colorbar=True)
+        radio_map.plot(ax=ax, kind="sinr", colorbar=True, legend=False)
         goals = None if destinations is None else destinations.get(panel)
         if goals is not None:
-            ax.plot(
-                *np.asarray(goals, dtype=float).T,
+            ax.plot(*np.asarray(goals, dtype=float).T, marker="X", ms=11, color="white", mec="black", ls="none")
+        for label, trajectory in trajectories.items():
+            colour = policies.setdefault(label, _POLICY_COLOURS[len(policies) % len(_POLICY_COLOURS)])
+            trajectory = np.asarray(trajectory, dtype=float)
+            n_robots = max(n_robots, trajectory.shape[1])
+            for u in range(trajectory.shape[1]):
+                style = _ROBOT_STYLES[u % len(_ROBOT_STYLES)]
+                ax.plot(*trajectory[:, u].T, color=colour, lw=1.6, ls=style)
+                ax.plot(*trajectory[0, u], marker="o", ms=5, color=colour, mec="black")
+                ax.plot(*trajectory[-1, u], marker="s", ms=5, color=colour, mec="black")
+        ax.set_title(panel)
+    map_handles, map_labels = axes[0].get_legend_handles_labels()
+    keys = [Line2D([], [], color=c, lw=2.5, label=label) for label, c in policies.items()]
+    keys += [
+        Line2D([], [], color="0.4", lw=1.6, ls=_ROBOT_STYLES[u % len(_ROBOT_STYLES)], label=f"robot {u}")
+        for u in range(n_robots)
+    ]
+    keys += [
+        Line2D([], [], ls="none", marker="o", ms=5, color="0.6", mec="black", label="start"),
+        Line2D([], [], ls="none", marker="s", ms=5, color="0.6", mec="black", label="end of the episode"),
+    ]
+    if destinations is not None and any(g is not None for g in destinations.values()):
+        keys.append(
+            Line2D(
+                [],
+                [],
+                ls="none",
                 marker="X",
                 ms=11,
                 color="white",
                 mec="black",
-                ls="none",
-                label="destination",
+                label=f"destination (reached within {scenario.robot.arrival_radius:g} m)",
             )
-        for k, (label, trajectory) in enumerate(trajectories.items()):
-            trajectory = np.asarray(trajectory, dtype=float)
-            for u in range(trajectory.shape[1]):
-                ax.plot(
-                    *trajectory[:, u].T,
-                    color=colours[k % len(colours)],
-                    lw=1.6,
-                    ls="-" if u == 0 else "--",
-                    label=label if u == 0 else None,
-                )
-                ax.plot(*trajectory[0, u], marker="o", ms=5, color=colours[k % len(colours)], mec="black")
-                ax.plot(*trajectory[-1, u], marker="s", ms=5, color=colours[k % len(colours)], mec="black")
-        ax.set_title(panel)
-        ax.legend(fontsize=7, loc="upper right", framealpha=0.6)
+        )
+    handles = keys + map_handles
+    fig.legend(
+        handles, [h.get_label() for h in keys] + map_labels, loc="outside lower center", ncol=4, fontsize=8, frameon=False
+    )
     return _save(fig, path, title)
 
 
@@ -210,7 +299,6 @@ def _save(fig: Any, path: str | Path, title: str | None) -> Any:
 
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return fig

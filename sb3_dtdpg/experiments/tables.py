@@ -2,6 +2,9 @@
 
 Learners are summarised over seeds: each seed's test figures (the mean over its test episodes) are one
 sample, and the CI is the t-interval over seeds. Planners have no seeds; their CI is over test episodes.
+The test MQI also gets the interquartile mean (IQM) with a 95 % stratified-bootstrap CI
+(:mod:`sb3_dtdpg.experiments.aggregate`), the RL field's summary for few-seed comparisons. A CI that
+cannot be estimated (one seed) is shown as ``n/a``, never as ``nan``.
 """
 
 from __future__ import annotations
@@ -15,11 +18,34 @@ import numpy as np
 import pandas as pd
 
 from sb3_dtdpg.evaluation import EvaluationResult, mean_ci
+from sb3_dtdpg.experiments.aggregate import iqm, stratified_bootstrap_ci
 
-__all__ = ["ALGO_LABELS", "format_markdown", "planner_row", "print_table", "run_records", "summarise"]
+__all__ = [
+    "ALGO_LABELS",
+    "PAPER_MQI_SCALE",
+    "format_ci",
+    "format_markdown",
+    "planner_row",
+    "print_table",
+    "run_records",
+    "summarise",
+    "table_notes",
+]
 
 ALGO_LABELS = {"dtdpg": "DT-DPG", "ddpg": "DDPG", "td3": "TD3", "sac": "SAC", "tqc": "TQC"}
 _METRICS = ("success_rate", "mqi", "outage_steps", "mission_time")
+#: The MQI scale of the paper's tables: ``t_total`` of its mall scenario (MQI is at most ``t_total``).
+PAPER_MQI_SCALE = 1000.0
+
+
+def _mqi_scale(scenario: str | None) -> float:
+    """``t_total`` (the largest possible MQI) of a run's scenario; ``nan`` if it can no longer be loaded."""
+    from noma_radiomap import load_scenario
+
+    try:
+        return float(load_scenario(scenario or "mall").mission.t_total)
+    except (OSError, ValueError, KeyError):
+        return math.nan
 
 
 def run_records(results: Iterable[dict[str, Any]]) -> pd.DataFrame:
@@ -45,6 +71,7 @@ def run_records(results: Iterable[dict[str, Any]]) -> pd.DataFrame:
                 "tag": spec["tag"],
                 "seed": spec["seed"],
                 **{metric: summary[metric] for metric in _METRICS},
+                "mqi_scale": _mqi_scale(spec.get("scenario")),
                 "train_timesteps": train["timesteps"],
                 "train_wall_s": train["wall_s"],
             }
@@ -59,7 +86,8 @@ def summarise(records: pd.DataFrame, by: Sequence[str] = ("algorithm", "multiple
     :param records: output of :func:`run_records`
     :param by: the columns that define a configuration
     :return: one row per configuration: ``n`` (seeds), ``<metric>`` and ``<metric>_ci`` columns,
-        ``train_timesteps`` (mean)
+        ``mqi_iqm`` with its bootstrap CI ``mqi_iqm_low`` / ``mqi_iqm_high``, ``mqi_scale`` (the
+        scenario's ``t_total``) and ``train_timesteps`` (mean)
     """
     rows = []
     for key, group in records.groupby(list(by), sort=False):
@@ -68,6 +96,9 @@ def summarise(records: pd.DataFrame, by: Sequence[str] = ("algorithm", "multiple
         row["ci_over"] = "seeds"
         for metric in _METRICS:
             row[metric], row[f"{metric}_ci"] = mean_ci(group[metric].to_numpy())
+        _add_iqm(row, group["mqi"].to_numpy())
+        if "mqi_scale" in group:
+            row["mqi_scale"] = float(group["mqi_scale"].max())
         row["train_timesteps"] = float(group["train_timesteps"].mean())
         rows.append(row)
     return pd.DataFrame(rows)
@@ -89,15 +120,71 @@ def planner_row(name: str, multiple_access: str, result: EvaluationResult) -> di
     row["success_rate"], row["success_rate_ci"] = mean_ci(success)
     for metric in _METRICS[1:]:
         row[metric], row[f"{metric}_ci"] = summary[metric], summary[f"{metric}_ci"]
+    _add_iqm(row, np.array([float(e["mqi"]) for e in result.episodes]))
     row["train_timesteps"] = math.nan
     return row
 
 
-def _pm(value: float, half: float, digits: int = 1, scale: float = 1.0) -> str:
+def _add_iqm(row: dict[str, Any], mqi: np.ndarray) -> None:
+    row["mqi_iqm"] = iqm(mqi)
+    row["mqi_iqm_low"], row["mqi_iqm_high"] = stratified_bootstrap_ci(mqi)
+
+
+def format_ci(value: float | None, half: float | None, digits: int = 1, scale: float = 1.0) -> str:
+    """
+    ``"mean ± half-width"`` for a table cell: ``"-"`` without a value, ``"mean ± n/a"`` when the CI is
+    undefined (e.g. one seed).
+
+    :param value: the mean
+    :param half: the CI half-width
+    :param digits: decimals
+    :param scale: factor applied to both (e.g. 100 for percentages)
+    :return: the cell text
+    """
     if value is None or not np.isfinite(value):
         return "-"
     text = f"{value * scale:.{digits}f}"
-    return text + (f" ± {half * scale:.{digits}f}" if half is not None and np.isfinite(half) else "")
+    return text + (f" ± {half * scale:.{digits}f}" if half is not None and np.isfinite(half) else " ± n/a")
+
+
+def _interval(value: float, low: float, high: float, digits: int = 1) -> str:
+    if value is None or not np.isfinite(value):
+        return "-"
+    bounds = f"[{low:.{digits}f}, {high:.{digits}f}]" if np.isfinite(low) and np.isfinite(high) else "[n/a]"
+    return f"{value:.{digits}f} {bounds}"
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def _scales(summary: pd.DataFrame) -> list[float]:
+    if "mqi_scale" not in summary:
+        return []
+    return sorted({float(v) for v in summary["mqi_scale"] if v is not None and np.isfinite(v)})
+
+
+def table_notes(summary: pd.DataFrame) -> list[str]:
+    """
+    The notes printed under a table: what the ± and the brackets mean and, where the table's MQIs and
+    the paper's are on different scales, how to compare them.
+
+    :param summary: output of :func:`summarise` (plus planner rows; plus ``paper_mqi`` for the paper's values)
+    :return: lines of text
+    """
+    notes = [
+        "mean ± 95 % CI (t-interval over seeds; planners: over test episodes); n/a: one sample, no CI",
+        "MQI IQM: interquartile mean with a 95 % stratified-bootstrap CI (rliable's method), same samples",
+    ]
+    scales = _scales(summary)
+    if "paper_mqi" in summary and any(s != PAPER_MQI_SCALE for s in scales):
+        ours = ", ".join(f"{s:g}" for s in scales)
+        notes.append(
+            f"Scales differ: MQI = t_total - sum over robots of (mission time + outage penalty x outage steps) is at "
+            f"most t_total, {ours} for the scenario tested here but {PAPER_MQI_SCALE:g} for the paper's mall "
+            f"scenario (Paper MQI); compare MQI / t_total, not the raw numbers"
+        )
+    return notes
 
 
 def _display(summary: pd.DataFrame, columns: Sequence[str]) -> tuple[list[str], list[list[str]]]:
@@ -109,34 +196,42 @@ def _display(summary: pd.DataFrame, columns: Sequence[str]) -> tuple[list[str], 
         "learning_rate": "LR",
         "tag": "Run",
     }
+    scales = _scales(summary)
+    of = f" (of {scales[0]:g})" if len(scales) == 1 else ""
     header = [
         *(names.get(c, c) for c in columns),
         "n",
         "Success (%)",
-        "Test MQI",
+        f"Test MQI{of}",
+        "MQI IQM [95 % CI]",
         "Outage steps",
         "Mission time",
         "Train steps",
     ]
     if "paper_mqi" in summary:
-        header.append("Paper MQI")
+        header.append(f"Paper MQI (mall, of {PAPER_MQI_SCALE:g})")
     body = []
     for _, row in summary.iterrows():
-        n = f"{int(row['n'])} {'seeds' if row['ci_over'] == 'seeds' else 'ep.'}"
+        n = _count(int(row["n"]), "seed" if row["ci_over"] == "seeds" else "episode")
         steps = row.get("train_timesteps", math.nan)
         body.append(
             [
                 *(str(row[c]) for c in columns),
                 n,
-                _pm(row["success_rate"], row["success_rate_ci"], 0, 100.0),
-                _pm(row["mqi"], row["mqi_ci"]),
-                _pm(row["outage_steps"], row["outage_steps_ci"]),
-                _pm(row["mission_time"], row["mission_time_ci"]),
+                format_ci(row["success_rate"], row["success_rate_ci"], 0, 100.0),
+                format_ci(row["mqi"], row["mqi_ci"]),
+                _interval(row.get("mqi_iqm", math.nan), row.get("mqi_iqm_low", math.nan), row.get("mqi_iqm_high", math.nan)),
+                format_ci(row["outage_steps"], row["outage_steps_ci"]),
+                format_ci(row["mission_time"], row["mission_time_ci"]),
                 "-" if not np.isfinite(steps) else f"{steps:,.0f}",
-                *([_pm(row["paper_mqi"], math.nan)] if "paper_mqi" in summary else []),
+                *([_plain(row["paper_mqi"])] if "paper_mqi" in summary else []),
             ]
         )
     return header, body
+
+
+def _plain(value: float) -> str:
+    return f"{value:.1f}" if value is not None and np.isfinite(value) else "-"
 
 
 def format_markdown(summary: pd.DataFrame, columns: Sequence[str] = ("algorithm", "multiple_access")) -> str:
@@ -154,14 +249,15 @@ def format_markdown(summary: pd.DataFrame, columns: Sequence[str] = ("algorithm"
 def print_table(summary: pd.DataFrame, title: str, columns: Sequence[str] = ("algorithm", "multiple_access")) -> None:
     """Print a summary as a rich table."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     header, body = _display(summary, columns)
-    table = Table(title=title, caption="mean ± 95 % CI (t-interval over seeds; planners: over test episodes)")
+    table = Table(title=title, caption="\n".join(table_notes(summary)))
     for k, name in enumerate(header):
         table.add_column(name, justify="left" if k < len(columns) else "right", no_wrap=True)
     for row in body:
-        table.add_row(*row)
+        table.add_row(*(escape(cell) for cell in row))  # "[n/a]" is not rich markup
     Console(width=200).print(table)
 
 
@@ -176,9 +272,7 @@ def save_tables(
     """Write ``<stem>.md`` (Markdown), ``<stem>.csv`` (summary) and ``<stem>_runs.csv`` (one row per run)."""
     out = Path(out)
     (out / f"{stem}.md").write_text(
-        f"# {title}\n\n"
-        + format_markdown(summary, columns)
-        + "\nmean ± 95 % CI (t-interval over seeds; planners: over test episodes)\n"
+        f"# {title}\n\n" + format_markdown(summary, columns) + "\n" + "".join(f"{note}.\n\n" for note in table_notes(summary))
     )
     summary.to_csv(out / f"{stem}.csv", index=False)
     if not records.empty:
