@@ -50,6 +50,10 @@ def test_compare_writes_table_csv_figures_and_event_files(tmp_path, capsys):
     for spec in specs:
         result = json.loads(result_path(tmp_path, spec).read_text())
         assert result["train"]["episodes"] == MICRO.episodes
+        # DT-DPG's 2-episode first phase ends within the 3 episodes: it is evaluated on its last phase's reward
+        trained, evaluated = (["destination", "mqi"], "mqi") if spec.algo == "dtdpg" else (["combined"], "combined")
+        assert result["reward_phases"] == {"trained": trained, "evaluated": evaluated}
+        assert result["eval"]["reward_phase"] == evaluated
         assert len(result["eval"]["episodes"]) == MICRO.eval_episodes
         assert (tmp_path / "runs" / spec.run_id / "model.zip").exists()
         tags = set(SummaryReader(str(tmp_path / "tb" / spec.run_id)).scalars["tag"])

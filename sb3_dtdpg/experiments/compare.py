@@ -15,7 +15,7 @@ from typing import Any
 
 import pandas as pd
 
-from sb3_dtdpg.experiments.runs import BUDGETS, Budget, RunSpec, load_result, run_many
+from sb3_dtdpg.experiments.runs import BUDGETS, Budget, RunSpec, check_budget, load_result, run_many
 
 __all__ = ["compare_specs", "evaluate_planners", "run_compare"]
 
@@ -116,6 +116,7 @@ def run_compare(
     :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :return: the summary table (learners and planners)
+    :raises ValueError: on a bad argument, or a budget that cannot train an algorithm (before any run starts)
     """
     from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
     from sb3_dtdpg.experiments import plots, tables
@@ -137,6 +138,8 @@ def run_compare(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams)
+    for spec in specs:
+        check_budget(spec)  # before any run
     report = run_many(specs, out, n_workers=n_workers, progress=progress)
     for run_id, error in report.failed.items():
         print(f"run {run_id} failed: {error}")

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-__all__ = ["BUDGETS", "Budget", "RunReport", "RunSpec", "load_result", "result_path", "run_many", "run_one"]
+__all__ = ["BUDGETS", "Budget", "RunReport", "RunSpec", "check_budget", "load_result", "result_path", "run_many", "run_one"]
 
 
 @dataclass(frozen=True)
@@ -149,8 +149,30 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def _evaluation_record(result: Any, n_trajectories: int) -> dict[str, Any]:
+def check_budget(spec: RunSpec) -> None:
+    """
+    :param spec: a run on a mission env
+    :raises ValueError: when its budget cannot train: at most ``episodes x mission.max_steps`` env steps, no more
+        than the algorithm's ``learning_starts`` (:func:`sb3_dtdpg.baselines.check_training_budget`)
+    """
+    import gymnasium as gym
+
+    from noma_radiomap import load_scenario
+    from sb3_dtdpg.baselines import check_training_budget, hyperparameter
+
+    scenario = spec.scenario or gym.spec(spec.env_id).kwargs.get("scenario", "mall")
+    max_steps = int(load_scenario(scenario).mission.max_steps)
+    check_training_budget(
+        spec.episodes * max_steps,
+        int(hyperparameter(spec.algo, "learning_starts", spec.hyperparams)),
+        f"{spec.episodes} episodes of at most {max_steps} steps ({spec.run_id})",
+        "train for more episodes (a larger budget)",
+    )
+
+
+def _evaluation_record(result: Any, n_trajectories: int, reward_phase: str) -> dict[str, Any]:
     return {
+        "reward_phase": reward_phase,
         "summary": result.summary(),
         "episodes": result.episodes,
         "trajectories": [np.round(t, 3).tolist() for t in result.trajectories[:n_trajectories]],
@@ -181,6 +203,10 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
     """
     Train, save and evaluate one run; the result is written to :func:`result_path` last.
 
+    The run is evaluated on the reward phase it finished training on (DT-DPG: its last phase's, ``mqi``; the
+    baselines: ``combined``), the network saved before the transfer on the first phase's; the result records
+    them (``reward_phases``, and ``reward_phase`` in each evaluation record).
+
     The model trains for ``spec.episodes`` episodes (``StopTrainingOnMaxEpisodes``), logging to TensorBoard
     in ``<out>/tb/<run_id>`` (SB3's scalars and the ``mission/*`` ones). DT-DPG also saves its network at
     the end of the destination phase (the paper's theta_X), which is evaluated too ("before transfer").
@@ -189,6 +215,7 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
     :param out: output folder
     :param n_trajectories: how many test episodes' trajectories to keep in the result
     :return: the result (as written)
+    :raises ValueError: when the budget cannot train (:func:`check_budget`)
     """
     import torch as th
     from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
@@ -198,6 +225,7 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
     from sb3_dtdpg.baselines import algorithm_class, make_env, make_model, mission_callbacks
     from sb3_dtdpg.evaluation import evaluate
 
+    check_budget(spec)
     th.set_num_threads(1)  # one core per run: runs are parallel across processes
     out = Path(out)
     run_dir = out / "runs" / spec.run_id
@@ -230,9 +258,15 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
     )
     train_s = time.perf_counter() - start
     model.save(run_dir / "model.zip")
+    curriculum = getattr(model, "curriculum_state", None)
+    if curriculum is not None:
+        trained_on = list(dict.fromkeys(entry.get("reward_phase") for entry in curriculum["history"]))
+    else:
+        trained_on = [env.unwrapped.reward_phase]
+    final_reward_phase = env.unwrapped.reward_phase
     env.close()
 
-    def _evaluate(policy: Any) -> Any:
+    def _evaluate(policy: Any, reward_phase: str) -> Any:
         return evaluate(
             policy,
             spec.env_id,
@@ -240,7 +274,7 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
             seed=spec.eval_seed,
             channel=spec.eval_channel,
             multiple_access=spec.multiple_access,
-            env_kwargs=spec.env_kwargs,
+            env_kwargs={**spec.env_kwargs, "reward_phase": reward_phase},
             return_trajectories=True,
         )
 
@@ -254,15 +288,17 @@ def run_one(spec: RunSpec, out: str | Path, n_trajectories: int = 3) -> dict[str
             "wall_s": train_s,
             "steps_per_s": model.num_timesteps / max(train_s, 1e-9),
         },
-        "eval": _evaluation_record(_evaluate(model), n_trajectories),
+        "reward_phases": {"trained": trained_on, "evaluated": final_reward_phase},
+        "eval": _evaluation_record(_evaluate(model, final_reward_phase), n_trajectories, final_reward_phase),
     }
     before = sorted(run_dir.glob("phase_*_destination.zip"))
     if before and spec.eval_before_transfer:
         load_env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
         phase_1 = algorithm_class(spec.algo).load(before[0], env=load_env, device="cpu")
-        result["before_transfer"] = _evaluation_record(_evaluate(phase_1), n_trajectories)
+        phase_1_reward = trained_on[0]
+        result["before_transfer"] = _evaluation_record(_evaluate(phase_1, phase_1_reward), n_trajectories, phase_1_reward)
         load_env.close()
-    result["curriculum_state"] = getattr(model, "curriculum_state", None)
+    result["curriculum_state"] = curriculum
     _write_json(result_path(out, spec), result)
     return result
 
