@@ -17,31 +17,16 @@ import torch as th
 
 import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)
 from sb3_dtdpg import DTDPG
-
-
-def evaluate(model: DTDPG, env: gym.Env, n_episodes: int, seed: int) -> dict[str, float]:
-    """Run deterministic episodes; return the success rate and the mean MQI and mission time."""
-    success, mqi, mission_time = [], [], []
-    for episode in range(n_episodes):
-        obs, _ = env.reset(seed=seed + episode)
-        done = False
-        while not done:
-            action, _ = model.predict(obs, deterministic=True)
-            obs, _, terminated, truncated, info = env.step(action)
-            done = terminated or truncated
-        success.append(info["is_success"])
-        mqi.append(info["mqi"])
-        mission_time.append(info["mission_time"])
-    return {"success_rate": float(np.mean(success)), "mqi": float(np.mean(mqi)), "mission_time": float(np.mean(mission_time))}
+from sb3_dtdpg.evaluation import evaluate
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--timesteps", type=int, default=5_000, help="training env steps")
-    parser.add_argument("--env", default="NomaRadioMap-v0")
-    parser.add_argument("--eval-episodes", type=int, default=5)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--save-path", default="dtdpg_noma.zip")
+    parser.add_argument("--env", default="NomaRadioMap-v0", help="a NomaRadioMap env id")
+    parser.add_argument("--eval-episodes", type=int, default=5, help="test episodes (Rayleigh fading)")
+    parser.add_argument("--seed", type=int, default=0, help="training seed")
+    parser.add_argument("--save-path", default="dtdpg_noma.zip", help="the saved model file")
     parser.add_argument("--tensorboard-log", default=None, help="TensorBoard folder (runs appear as DTDPG_<n>)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest for these small networks)")
     args = parser.parse_args()
@@ -53,12 +38,17 @@ def main() -> None:
     phase = model.phases[model.curriculum_state["phase_index"]].name
     print(f"trained {model.num_timesteps} steps, {model._episode_num} episodes; curriculum phase: {phase!r}")
 
-    eval_env = gym.make(args.env)
-    print("evaluation:", evaluate(model, eval_env, args.eval_episodes, seed=10_000))
+    # The paper's test protocol: Rayleigh fading, episode i reset with seed + i (the same missions for every policy)
+    result = evaluate(model, args.env, n_episodes=args.eval_episodes, seed=10_000)
+    summary = result.summary()
+    print(
+        f"evaluation ({args.eval_episodes} Rayleigh episodes): success {100 * summary['success_rate']:.0f} %, "
+        f"MQI {summary['mqi']:.1f} ± {summary['mqi_ci']:.1f}, mission time {summary['mission_time']:.0f} steps"
+    )
 
     model.save(args.save_path)
     loaded = DTDPG.load(args.save_path, env=env)
-    obs, _ = eval_env.reset(seed=10_000)
+    obs, _ = gym.make(args.env).reset(seed=10_000)
     action, _ = loaded.predict(obs, deterministic=True)
     assert np.array_equal(action, model.predict(obs, deterministic=True)[0])
     print(f"saved to {args.save_path}, loaded; first action of a mission: {np.round(action, 3)}")

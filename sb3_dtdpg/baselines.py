@@ -48,6 +48,9 @@ __all__ = [
     "algorithm_class",
     "base_learning_rate",
     "check_hyperparams",
+    "check_training_budget",
+    "hyperparameter",
+    "is_mission_env",
     "make_env",
     "make_model",
     "mission_callbacks",
@@ -114,18 +117,47 @@ def check_hyperparams(algo: str, hyperparams: str) -> None:
         raise ValueError(f"hyperparams='tuned' is defined for 'dtdpg' and 'ddpg' only, got algo={algo!r}")
 
 
+def hyperparameter(algo: str, name: str, hyperparams: str = "paper") -> Any:
+    """
+    :param algo: one of :data:`ALGORITHMS`
+    :param name: a constructor argument of the algorithm (e.g. ``"learning_starts"``)
+    :param hyperparams: one of :data:`HYPERPARAMS`
+    :return: the value :func:`make_model` gives that argument when none is passed
+    """
+    check_hyperparams(_check_algo(algo), hyperparams)
+    if hyperparams == "tuned" and name in TUNED_KWARGS:
+        return copy.deepcopy(TUNED_KWARGS[name])
+    if algo in ("dtdpg", "ddpg") and name in DDPG_KWARGS:
+        return copy.deepcopy(DDPG_KWARGS[name])
+    return inspect.signature(_CLASSES[algo]).parameters[name].default
+
+
 def base_learning_rate(algo: str, hyperparams: str = "paper") -> float:
     """
     :param algo: one of :data:`ALGORITHMS`
     :param hyperparams: one of :data:`HYPERPARAMS`
     :return: the learning rate :func:`make_model` gives the algorithm when none is passed (a constant)
     """
-    check_hyperparams(_check_algo(algo), hyperparams)
-    if hyperparams == "tuned":
-        return TUNED_KWARGS["learning_rate"]
-    if algo in ("dtdpg", "ddpg"):
-        return DDPG_KWARGS["learning_rate"]
-    return inspect.signature(_CLASSES[algo]).parameters["learning_rate"].default
+    return hyperparameter(algo, "learning_rate", hyperparams)
+
+
+def check_training_budget(total_timesteps: int, learning_starts: int, budget: str = "", hint: str = "") -> None:
+    """
+    The check that a training budget can train at all: SB3's off-policy algorithms take their first gradient
+    step after ``learning_starts`` env steps, so a budget of at most that many steps only fills the replay
+    buffer and leaves the networks as initialised.
+
+    :param total_timesteps: the most env steps the run can take
+    :param learning_starts: the model's ``learning_starts``
+    :param budget: how the budget was given, for the message (default: ``"<total_timesteps> env steps"``)
+    :param hint: what to change, appended to the message
+    :raises ValueError: when ``total_timesteps <= learning_starts``
+    """
+    if total_timesteps <= learning_starts:
+        raise ValueError(
+            f"a training budget of {budget or f'{total_timesteps} env steps'} cannot train: the first gradient step "
+            f"comes after learning_starts={learning_starts} steps" + (f"; {hint}" if hint else "")
+        )
 
 
 def reward_phase(algo: str) -> str:
@@ -136,25 +168,56 @@ def reward_phase(algo: str) -> str:
     return "destination" if _check_algo(algo) == "dtdpg" else "combined"
 
 
+def is_mission_env(env_id: str) -> bool:
+    """
+    :param env_id: a registered env id
+    :return: whether it is one of the mission envs (:class:`noma_radiomap.NomaRadioMapEnv`), which take the
+        mission options (``multiple_access``, ``channel``, ``scenario``, ``reward_phase``)
+    :raises gymnasium.error.Error: when the id is not registered
+    """
+    from gymnasium.envs.registration import load_env_creator
+
+    from noma_radiomap import NomaRadioMapEnv
+    from noma_radiomap.registration import make_env as mission_entry_point
+
+    entry_point = gym.spec(env_id).entry_point
+    creator = load_env_creator(entry_point) if isinstance(entry_point, str) else entry_point
+    if creator is mission_entry_point:  # the registered ids: the env in a TimeLimit of its scenario's length
+        return True
+    return isinstance(creator, type) and issubclass(creator, NomaRadioMapEnv)
+
+
 def make_env(
     algo: str,
     env_id: str = DEFAULT_ENV_ID,
-    multiple_access: str = "noma",
-    channel: str = "radio_map",
+    multiple_access: str | None = None,
+    channel: str | None = None,
     env_kwargs: dict[str, Any] | None = None,
 ) -> gym.Env:
     """
-    The training env of an algorithm: ``env_id`` in the requested mode, starting in the algorithm's
-    reward phase, wrapped in a ``Monitor`` (episode returns and ``is_success`` for SB3's logger).
+    The training env of an algorithm, wrapped in a ``Monitor`` (episode returns for SB3's logger).
+
+    A mission env (:func:`is_mission_env`) is built in the requested mode, starting in the algorithm's reward
+    phase, and its ``Monitor`` also records ``is_success``. Any other registered env is built as it is
+    (with ``env_kwargs``); the mission options must then be None.
 
     :param algo: one of :data:`ALGORITHMS`
-    :param env_id: a registered mission env id
-    :param multiple_access: ``"noma"`` or ``"oma"``
-    :param channel: ``"radio_map"`` (the paper's training) or ``"rayleigh"`` ("reality" training)
+    :param env_id: a registered env id
+    :param multiple_access: mission envs: ``"noma"`` or ``"oma"`` (None: the env id's own)
+    :param channel: mission envs: ``"radio_map"`` (the paper's training) or ``"rayleigh"`` ("reality" training)
+        (None: the env id's own)
     :param env_kwargs: extra ``gymnasium.make`` keyword arguments (e.g. ``scenario``)
     :return: the env
     """
-    kwargs = {"multiple_access": multiple_access, "channel": channel, **(env_kwargs or {})}
+    _check_algo(algo)
+    mission_options = {"multiple_access": multiple_access, "channel": channel}
+    if not is_mission_env(env_id):
+        given = [name for name, value in mission_options.items() if value is not None]
+        if given:
+            raise ValueError(f"{env_id} is not a NomaRadioMap env: {', '.join(given)} apply to the mission envs only")
+        return Monitor(gym.make(env_id, **(env_kwargs or {})))
+    kwargs = {name: value for name, value in mission_options.items() if value is not None}
+    kwargs.update(env_kwargs or {})
     kwargs["reward_phase"] = reward_phase(algo)
     return Monitor(gym.make(env_id, **kwargs), info_keywords=("is_success",))
 

@@ -7,19 +7,29 @@ sampler to ``HYPERPARAMS_SAMPLER`` (``--optimize``) and its converter to ``HYPER
 (``--trial-id``, which reads a stored trial's raw parameters back through the converter).
 Importing this module also imports :mod:`noma_radiomap`, so the NomaRadioMap env ids need no ``--gym-packages``.
 
-:class:`ExperimentManager` is the zoo's own, with two small fixes for rl_zoo3 2.9 used by
-``python -m sb3_dtdpg.train`` (see its docstring).
+:class:`ExperimentManager` is the zoo's own with a few fixes and the package's default configs, used by
+``python -m sb3_dtdpg.train`` (see its docstring). This module needs the ``zoo`` extra
+(``pip install "sb3-dtdpg[zoo]"``); without it, importing it raises an ``ImportError`` that says so.
 """
 
 import dataclasses
+from pathlib import Path
 from typing import Any
 
-import optuna
-import rl_zoo3
-import rl_zoo3.exp_manager
-from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
+try:
+    import optuna
+    import rl_zoo3
+    import rl_zoo3.exp_manager
+    from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
+except ModuleNotFoundError as error:
+    raise ModuleNotFoundError(
+        f"the RL Zoo integration of sb3-dtdpg needs the 'zoo' extra ({error.name} is not installed): "
+        'pip install "sb3-dtdpg[zoo]"',
+        name=error.name,
+    ) from error
 
 import noma_radiomap  # noqa: F401  (registers the NomaRadioMap env ids)
+from sb3_dtdpg.baselines import check_training_budget
 from sb3_dtdpg.common.phases import REPLAY_HANDLINGS
 from sb3_dtdpg.dtdpg import DTDPG
 from sb3_dtdpg.missions import default_phases
@@ -125,6 +135,35 @@ def register_dtdpg() -> None:
     HYPERPARAMS_CONVERTER[ALGO_NAME] = convert_dtdpg_params
 
 
+def config_dir() -> Path:
+    """
+    :return: the folder of the package's RL Zoo configs (``zoo_configs/*.yml``): inside the installed package
+        (``sb3_dtdpg/zoo_configs``), or the top-level ``zoo_configs/`` of a source checkout
+    """
+    packaged = Path(__file__).with_name("zoo_configs")
+    return packaged if packaged.is_dir() else Path(__file__).resolve().parents[1] / "zoo_configs"
+
+
+def default_config(algo: str, env_id: str) -> Path | None:
+    """
+    The package's config that ``python -m sb3_dtdpg.train`` uses when ``--conf-file`` is omitted.
+
+    :param algo: the zoo's algorithm name (``dtdpg``, ``ddpg``, ...)
+    :param env_id: the env id
+    :return: ``<config_dir>/<algo>.yml`` for ``dtdpg`` (the zoo has none), and for the other algorithms when
+        the file has an entry for ``env_id``; None otherwise (the zoo's own default file applies)
+    """
+    import yaml
+
+    path = config_dir() / f"{algo}.yml"
+    if not path.is_file():
+        return None
+    if algo == ALGO_NAME:
+        return path
+    with open(path) as f:
+        return path if env_id in (yaml.safe_load(f) or {}) else None
+
+
 class _TrialNumber(int):
     """A trial number that is truthy even when it is 0 (see :class:`ExperimentManager`)."""
 
@@ -134,15 +173,22 @@ class _TrialNumber(int):
 
 class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
     """
-    The RL Zoo's experiment manager (same arguments), with two fixes for rl_zoo3 2.9:
+    The RL Zoo's experiment manager (same arguments), with the package's default configs and these fixes
+    for rl_zoo3 2.9:
 
+    - Without ``config`` (``--conf-file``), the package's ``zoo_configs/<algo>.yml`` is used (:func:`default_config`):
+      always for ``dtdpg``, for the zoo's algorithms when it has an entry for the env.
+    - ``env_kwargs`` (``--env-kwargs``) are merged into the ``env_kwargs`` of the hyperparameter file instead of
+      replacing them (``--env-kwargs multiple_access:"'oma'"`` keeps the file's ``reward_phase``);
+      ``eval_env_kwargs`` (``--eval-env-kwargs``) are merged over the result the same way.
+    - ``env_kwargs`` from the hyperparameter file also reach the evaluation env, as the zoo intends ("use
+      env-kwargs if eval_env_kwargs was not specified"); in 2.9 they only did when ``--env-kwargs`` was given
+      too, so e.g. DDPG's ``reward_phase: combined`` was evaluated on the env's default reward.
     - ``--trial-id 0`` (the first trial of a study) is honoured: the zoo tests ``self.trial_id`` for truth,
       so trial 0 was silently skipped and the YAML defaults trained instead (DLR-RM/rl-baselines3-zoo#498).
       ``--trial-id`` without ``--storage`` and ``--study-name`` is an error instead of being ignored.
-    - ``env_kwargs`` from the hyperparameter file also reach the evaluation env unless ``--eval-env-kwargs``
-      is given, as the zoo intends ("use env-kwargs if eval_env_kwargs was not specified"); in 2.9 they only
-      did when ``--env-kwargs`` was given too, so e.g. DDPG's ``reward_phase: combined`` was evaluated on
-      the env's default reward.
+    - A budget that cannot train (``n_timesteps <= learning_starts``) is an error
+      (:func:`sb3_dtdpg.baselines.check_training_budget`).
 
     For DT-DPG training runs it also puts the curriculum's phase checkpoints (``phase_<k>_<name>.zip``)
     in the run's log folder, unless the hyperparameters set ``curriculum_save_path`` themselves.
@@ -150,6 +196,10 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        if kwargs.get("config") is None:
+            path = default_config(self.algo, self.env_name.gym_id)
+            if path is not None:
+                self.config = str(path)
         if self.trial_id is not None:
             if not (self.storage and self.study_name):
                 raise ValueError(
@@ -158,10 +208,43 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
                 )
             self.trial_id = _TrialNumber(self.trial_id)
 
+    def read_hyperparameters(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        # The zoo replaces the file's env_kwargs by --env-kwargs when both exist: hide ours from it, then merge.
+        cli_env_kwargs, self.env_kwargs = self.env_kwargs, {}
+        try:
+            hyperparams, saved_hyperparams = super().read_hyperparameters()
+        finally:
+            self.env_kwargs = cli_env_kwargs
+        file_env_kwargs = hyperparams.get("env_kwargs") or {}
+        if not isinstance(file_env_kwargs, dict):
+            raise ValueError(f"env_kwargs in {self.config} must be a mapping, got {file_env_kwargs!r}")
+        env_kwargs = {**file_env_kwargs, **cli_env_kwargs}
+        if env_kwargs:
+            hyperparams["env_kwargs"] = saved_hyperparams["env_kwargs"] = env_kwargs
+        self.env_kwargs = env_kwargs
+        self.eval_env_kwargs = {**env_kwargs, **(self._eval_env_kwargs_args or {})}
+        return hyperparams, saved_hyperparams
+
     def _preprocess_hyperparams(self, hyperparams: dict[str, Any]) -> tuple[Any, ...]:
+        learning_starts = hyperparams.get("learning_starts")
         hyperparams, *others = super()._preprocess_hyperparams(hyperparams)
-        if self._eval_env_kwargs_args is None:
-            self.eval_env_kwargs = self.env_kwargs
+        if learning_starts is None:
+            learning_starts = _default_learning_starts(rl_zoo3.ALGOS[self.algo])
+        if learning_starts is not None:
+            check_training_budget(
+                self.n_timesteps,
+                learning_starts,
+                f"n_timesteps={self.n_timesteps}",
+                "raise n_timesteps (-n) or lower learning_starts (-params learning_starts:<steps>)",
+            )
+        self.eval_env_kwargs = {**self.env_kwargs, **(self._eval_env_kwargs_args or {})}
         if self.algo == ALGO_NAME and not self.optimize_hyperparameters:
             hyperparams.setdefault("curriculum_save_path", self.save_path)
         return (hyperparams, *others)
+
+
+def _default_learning_starts(algo_class: type) -> int | None:
+    import inspect
+
+    parameter = inspect.signature(algo_class).parameters.get("learning_starts")
+    return None if parameter is None else parameter.default

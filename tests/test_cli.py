@@ -24,7 +24,7 @@ def _agg_backend(monkeypatch):
 
 
 def test_compare_writes_table_csv_figures_and_event_files(tmp_path, capsys):
-    assert main(["compare", "--budget", "_micro", "--seeds", "2", "--out", str(tmp_path)]) == 0
+    assert main(["compare", "--budget", "_micro", "--hyperparams", "paper", "--seeds", "2", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert "DT-DPG" in printed and "DDPG" in printed and "comm-aware planner" in printed
     for name in ("results.md", "results.csv", "results_runs.csv", "learning_curves.png", "trajectories.png"):
@@ -50,6 +50,10 @@ def test_compare_writes_table_csv_figures_and_event_files(tmp_path, capsys):
     for spec in specs:
         result = json.loads(result_path(tmp_path, spec).read_text())
         assert result["train"]["episodes"] == MICRO.episodes
+        # DT-DPG's 2-episode first phase ends within the 3 episodes: it is evaluated on its last phase's reward
+        trained, evaluated = (["destination", "mqi"], "mqi") if spec.algo == "dtdpg" else (["combined"], "combined")
+        assert result["reward_phases"] == {"trained": trained, "evaluated": evaluated}
+        assert result["eval"]["reward_phase"] == evaluated
         assert len(result["eval"]["episodes"]) == MICRO.eval_episodes
         assert (tmp_path / "runs" / spec.run_id / "model.zip").exists()
         tags = set(SummaryReader(str(tmp_path / "tb" / spec.run_id)).scalars["tag"])
@@ -120,7 +124,20 @@ def test_reproduce_with_tuned_hyperparameters_compares_the_paper_learning_rate()
 def test_map_and_train_commands(tmp_path):
     assert main(["map", "--scenario", "small", "--out", str(tmp_path / "maps")]) == 0
     assert (tmp_path / "maps" / "maps_small.png").stat().st_size > 0
-    args = ["train", "--algo", "ddpg", "--scenario", "small", "--episodes", "2", "--eval-episodes", "1", "--no-progress"]
+    args = [
+        "train",
+        "--algo",
+        "ddpg",
+        "--hyperparams",
+        "paper",
+        "--scenario",
+        "small",
+        "--episodes",
+        "2",
+        "--eval-episodes",
+        "1",
+    ]
+    args.append("--no-progress")
     assert main([*args, "--tb", str(tmp_path / "tb"), "--out", str(tmp_path / "models")]) == 0
     assert (tmp_path / "models" / "runs" / "ddpg_noma_s0" / "model.zip").exists()
     result = json.loads((tmp_path / "models" / "runs" / "ddpg_noma_s0" / "result.json").read_text())

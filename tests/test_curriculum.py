@@ -115,6 +115,7 @@ def test_switches_phase_env_reward_and_noise_at_configured_episode(algo):
     state = model.curriculum_state
     assert state["history"][0] == {
         "phase": "destination",
+        "reward_phase": "destination",
         "start_timestep": 0,
         "end_timestep": 60,
         "episodes": 3,

@@ -203,7 +203,19 @@ def test_run_many_uses_the_pool_that_ends_with_its_parent():
 
 
 # ---------------------------------------------------------------------------------------------- train
-TRAIN = ["train", "--scenario", "small", "--episodes", "4", "--checkpoint-every", "2", "--eval-episodes", "1"]
+TRAIN = [
+    "train",
+    "--hyperparams",
+    "paper",
+    "--scenario",
+    "small",
+    "--episodes",
+    "4",
+    "--checkpoint-every",
+    "2",
+    "--eval-episodes",
+    "1",
+]
 
 
 @pytest.mark.parametrize("algo", ["ddpg", "dtdpg"])

@@ -26,7 +26,14 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 import noma_radiomap  # noqa: E402, F401
 from sb3_dtdpg import DTDPG  # noqa: E402
 from sb3_dtdpg.common.phases import parse_phases  # noqa: E402
-from sb3_dtdpg.zoo import NET_ARCHS, ExperimentManager, convert_dtdpg_params, register_dtdpg, sample_dtdpg_params  # noqa: E402
+from sb3_dtdpg.zoo import (  # noqa: E402
+    NET_ARCHS,
+    ExperimentManager,
+    config_dir,
+    convert_dtdpg_params,
+    register_dtdpg,
+    sample_dtdpg_params,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "zoo_configs"
@@ -193,6 +200,46 @@ def test_yaml_env_kwargs_reach_the_eval_env(tmp_path: Path) -> None:
 
     assert eval_kwargs() == {"reward_phase": "combined"}
     assert eval_kwargs(eval_env_kwargs={"reward_phase": "mqi"}) == {"reward_phase": "mqi"}
+
+
+def test_env_kwargs_merge_into_the_config_env_kwargs(tmp_path: Path) -> None:
+    def kwargs(**manager_kwargs: Any) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+        manager = ExperimentManager(
+            argparse.Namespace(), "ddpg", ENV_ID, str(tmp_path), config=str(CONFIGS / "ddpg.yml"), **manager_kwargs
+        )
+        hyperparams, saved = manager.read_hyperparameters()
+        manager._preprocess_hyperparams(hyperparams)
+        return manager.env_kwargs, manager.eval_env_kwargs, saved["env_kwargs"]
+
+    oma = {"reward_phase": "combined", "multiple_access": "oma"}
+    assert kwargs(env_kwargs={"multiple_access": "oma"}) == (oma, oma, oma)  # reward_phase kept, and saved
+    assert kwargs(env_kwargs={"reward_phase": "mqi"})[0] == {"reward_phase": "mqi"}  # the command line wins
+    env, evaluation, _ = kwargs(env_kwargs={"multiple_access": "oma"}, eval_env_kwargs={"channel": "rayleigh"})
+    assert env == oma and evaluation == {**oma, "channel": "rayleigh"}
+
+
+def test_packaged_configs_are_the_defaults(tmp_path: Path) -> None:
+    register_dtdpg()
+
+    def config(algo: str, env_id: str) -> str:
+        return ExperimentManager(argparse.Namespace(), algo, env_id, str(tmp_path)).config
+
+    assert config_dir() == CONFIGS  # a source checkout
+    assert config("dtdpg", ENV_ID) == config("dtdpg", "Pendulum-v1") == str(CONFIGS / "dtdpg.yml")
+    assert config("ddpg", "NomaRadioMapOMA-v0") == str(CONFIGS / "ddpg.yml")
+    assert Path(config("ddpg", "Pendulum-v1")).parent == Path(rl_zoo3.__file__).parent / "hyperparams"  # the zoo's own
+    assert ExperimentManager(argparse.Namespace(), "ddpg", ENV_ID, str(tmp_path), config="my.yml").config == "my.yml"
+
+
+def test_a_budget_that_cannot_train_is_an_error(tmp_path: Path) -> None:
+    manager = ExperimentManager(argparse.Namespace(), "dtdpg", ENV_ID, str(tmp_path), n_timesteps=2000)
+    hyperparams, _ = manager.read_hyperparameters()
+    with pytest.raises(ValueError, match=r"n_timesteps=2000 cannot train: .* learning_starts=2000"):
+        manager._preprocess_hyperparams(hyperparams)
+    manager = ExperimentManager(argparse.Namespace(), "sac", ENV_ID, str(tmp_path), n_timesteps=100)
+    hyperparams, _ = manager.read_hyperparameters()
+    with pytest.raises(ValueError, match="learning_starts=100"):
+        manager._preprocess_hyperparams(hyperparams)
 
 
 def test_trial_id_without_storage_is_an_error(tmp_path: Path) -> None:

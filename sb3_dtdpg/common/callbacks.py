@@ -7,7 +7,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files
 from sb3_dtdpg.common.noise import decaying_noise, noise_sigma, rearm_noise
@@ -48,6 +48,11 @@ class CurriculumTransferCallback(BaseCallback):
     resumes in the same phase, and repeated ``learn()`` calls continue the curriculum. Loading a
     ``phase_<k>_<name>.zip`` checkpoint and training goes on with phase k + 1.
 
+    Evaluation follows the curriculum: the eval envs of ``eval_callbacks`` (SB3 ``EvalCallback`` objects) switch
+    reward phase with the training env, so each evaluation measures the reward being trained, and at each
+    transfer their best mean reward is reset, so ``best_model.zip`` is the best model on the last phase's reward.
+    ``DTDPG.learn`` passes the ``EvalCallback`` objects among its callbacks.
+
     Logged: ``curriculum/phase`` (index), ``curriculum/noise_sigma``, ``curriculum/episodes_in_phase`` at every
     step (written at SB3's log dumps); a line per transfer with ``verbose >= 1``.
 
@@ -58,6 +63,7 @@ class CurriculumTransferCallback(BaseCallback):
     :param save_path: Folder for the per-phase checkpoints (None: no checkpoints).
     :param reinitialize_at_transfer: Ablation: re-initialise the networks at each transfer instead of carrying them
         over (needs a model with ``reinitialize()``, e.g. :class:`sb3_dtdpg.DTDPG`).
+    :param eval_callbacks: ``EvalCallback`` objects whose eval envs follow the curriculum's reward phase.
     :param verbose: Verbosity level: 0 no output, 1 a line per transfer.
     """
 
@@ -67,9 +73,11 @@ class CurriculumTransferCallback(BaseCallback):
         save_path: str | os.PathLike[str] | None = None,
         reinitialize_at_transfer: bool = False,
         verbose: int = 0,
+        eval_callbacks: Sequence[EvalCallback] = (),
     ):
         super().__init__(verbose=verbose)
         self.phases = parse_phases(phases)
+        self.eval_callbacks = list(eval_callbacks)
         self.save_path = None if save_path is None else os.fspath(save_path)
         self.reinitialize_at_transfer = reinitialize_at_transfer
         self._pending_replay: Phase | None = None
@@ -104,6 +112,7 @@ class CurriculumTransferCallback(BaseCallback):
     def _new_history_entry(self, index: int) -> dict[str, Any]:
         return {
             "phase": self.phases[index].name,
+            "reward_phase": self.phases[index].reward_phase,
             "start_timestep": int(self.num_timesteps),
             "end_timestep": None,
             "episodes": None,
@@ -227,6 +236,8 @@ class CurriculumTransferCallback(BaseCallback):
         if self.reinitialize_at_transfer:
             self.model.reinitialize()  # type: ignore[attr-defined]
         self._set_env_phase(phase)
+        for callback in self.eval_callbacks:
+            callback.best_mean_reward = -np.inf  # the earlier phases' best was measured on another reward
         self._arm_noise(phase)
         if phase.replay_handling == "clear":
             # Cleared now, not after SB3 stores this step's transitions: the gradient step that follows the
@@ -255,6 +266,8 @@ class CurriculumTransferCallback(BaseCallback):
     def _set_env_phase(self, phase: Phase) -> None:
         if phase.reward_phase is not None:
             self.training_env.env_method("set_reward_phase", phase.reward_phase)
+            for callback in self.eval_callbacks:
+                callback.eval_env.env_method("set_reward_phase", phase.reward_phase)
 
     def _arm_noise(self, phase: Phase) -> None:
         schedule = phase.noise_schedule()
@@ -301,6 +314,12 @@ class CurriculumTransferCallback(BaseCallback):
                 unknown = [name for name in reward_phases if name not in known]
                 if unknown:
                     raise ValueError(f"reward_phase {unknown[0]!r} of the phases is not a reward phase of the env {known}")
+            for callback in self.eval_callbacks:
+                if not callback.eval_env.has_attr("set_reward_phase"):
+                    raise ValueError(
+                        f"the phases use the env reward phases {reward_phases}, but the eval env of "
+                        f"{type(callback).__name__} has no set_reward_phase() to follow them"
+                    )
         for phase in self.phases[1:]:
             if phase.replay_handling != "relabel":
                 continue

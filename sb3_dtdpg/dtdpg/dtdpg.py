@@ -6,7 +6,7 @@ from typing import Any, ClassVar, TypeVar
 import torch as th
 from stable_baselines3 import DDPG
 from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, EvalCallback
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
@@ -35,7 +35,9 @@ class DTDPG(DDPG):
     the other, the networks carrying over from one phase to the next
     (:class:`~sb3_dtdpg.common.callbacks.CurriculumTransferCallback`, added by :meth:`learn`). The curriculum
     state is kept in ``model.curriculum_state`` and saved with the model, so repeated ``learn()`` calls, and
-    ``load()`` then ``learn(..., reset_num_timesteps=False)``, continue in the same phase.
+    ``load()`` then ``learn(..., reset_num_timesteps=False)``, continue in the same phase. An ``EvalCallback`` given
+    to :meth:`learn` evaluates on the current phase's reward (its eval env follows the curriculum) and its
+    ``best_model.zip`` is the best on the last phase's reward; Optuna trial callbacks keep their env's reward.
 
     Defaults are the settings that trained best in ``benchmarks/`` (docs/BENCHMARKS.md, "DT-DPG learning"):
     learning rate 1e-3, buffer 2e5, 2000 warm-up steps, batch 128, tau 0.005, gamma 0.95, 3-step returns and
@@ -211,16 +213,20 @@ class DTDPG(DDPG):
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> SelfDTDPG:
+        user_callbacks: list[BaseCallback] = []
+        for user_callback in callback if isinstance(callback, list) else [callback]:
+            if user_callback is not None:
+                if not isinstance(user_callback, BaseCallback):
+                    user_callback = ConvertCallback(user_callback)
+                user_callbacks.append(user_callback)
         curriculum = CurriculumTransferCallback(
             self.phases,
             save_path=self.curriculum_save_path,
             reinitialize_at_transfer=self.reinitialize_at_transfer,
             verbose=self.verbose,
+            eval_callbacks=_curriculum_evaluations(user_callbacks),
         )
-        callbacks: list[BaseCallback] = [curriculum, MissionLoggerCallback()]
-        for user_callback in callback if isinstance(callback, list) else [callback]:
-            if user_callback is not None:
-                callbacks.append(user_callback if isinstance(user_callback, BaseCallback) else ConvertCallback(user_callback))
+        callbacks: list[BaseCallback] = [curriculum, MissionLoggerCallback(), *user_callbacks]
         return super().learn(
             total_timesteps=total_timesteps,
             callback=CallbackList(callbacks),
@@ -229,3 +235,18 @@ class DTDPG(DDPG):
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
         )
+
+
+def _curriculum_evaluations(callbacks: list[BaseCallback]) -> list[EvalCallback]:
+    """
+    The ``EvalCallback`` objects (also inside ``CallbackList`` objects) whose eval env follows the curriculum's reward phase.
+    Optuna's trial callbacks (the RL Zoo's ``TrialEvalCallback``, which has a ``trial``) keep their env's reward:
+    a search compares trials on one objective, also those that never reach the last phase.
+    """
+    found: list[EvalCallback] = []
+    for callback in callbacks:
+        if isinstance(callback, CallbackList):
+            found += _curriculum_evaluations(callback.callbacks)
+        elif isinstance(callback, EvalCallback) and not hasattr(callback, "trial"):
+            found.append(callback)
+    return found

@@ -15,7 +15,7 @@ from typing import Any
 
 import pandas as pd
 
-from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, check_budget, get_budget, load_result, output_lock, run_many
 
 __all__ = ["compare_specs", "evaluate_planners", "run_compare"]
 
@@ -116,6 +116,7 @@ def run_compare(
     :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :return: the summary table (learners and planners)
+    :raises ValueError: on a bad argument, or a budget that cannot train an algorithm (before any run starts)
     :raises OutputBusyError: another job is using ``out``
     :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
         scenario or hyperparameters): use another folder
@@ -141,6 +142,8 @@ def run_compare(
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams)
+        for spec in specs:
+            check_budget(spec)  # before any run
         report = run_many(specs, out, n_workers=n_workers, progress=progress)
         for run_id, error in report.failed.items():
             print(f"run {run_id} failed: {error}")

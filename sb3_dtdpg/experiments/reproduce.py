@@ -27,7 +27,7 @@ from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import tables
 from sb3_dtdpg.experiments.compare import evaluate_planners
-from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, check_budget, get_budget, load_result, output_lock, run_many
 
 __all__ = ["LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
 
@@ -142,7 +142,7 @@ def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[s
 
 def run_reproduce(
     out: str | Path = "results/reproduce",
-    budget: str | Budget = "paper",
+    budget: str | Budget = "tiny",
     seeds: int | None = None,
     n_workers: int | None = None,
     progress: bool = True,
@@ -153,18 +153,19 @@ def run_reproduce(
     Run (or resume) every experiment and write its tables (Markdown + CSV) and figures under ``out``.
 
     :param out: output folder
-    :param budget: a budget name or :class:`~sb3_dtdpg.experiments.runs.Budget`
+    :param budget: a budget name or :class:`~sb3_dtdpg.experiments.runs.Budget` (default ``"tiny"``: the whole
+        pipeline in minutes; ``"paper"`` is the paper's scale, hours)
     :param seeds: seeds per configuration (default: the budget's)
     :param n_workers: parallel processes (default: the number of CPUs)
     :param progress: progress bars and printed tables
     :param train: run the unfinished runs; False only re-draws the tables and figures from the finished ones
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :return: the tables, by name
+    :raises ValueError: on a bad argument, or a budget that cannot train a run (before any run starts)
     :raises OutputBusyError: another job is using ``out``
     :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
         scenario or hyperparameters): use another folder
     """
-    from sb3_dtdpg.experiments import tables
 
     budget = get_budget(budget)
     seeds = budget.seeds if seeds is None else seeds
@@ -179,6 +180,8 @@ def run_reproduce(
         # Seed by seed, so that an interrupted job has whole seeds of every experiment.
         unique.sort(key=lambda spec: spec.seed)
         if train:
+            for spec in unique:
+                check_budget(spec)  # before any run
             report = run_many(unique, out, n_workers=n_workers, progress=progress)
             for run_id, error in report.failed.items():
                 print(f"run {run_id} failed: {error}")

@@ -47,6 +47,7 @@ __all__ = [
     "RunMismatchError",
     "RunReport",
     "RunSpec",
+    "check_budget",
     "get_budget",
     "load_result",
     "output_lock",
@@ -88,7 +89,7 @@ class Budget:
 #: runs in about an hour, docs/RESULTS.md). ``_micro`` is for the tests.
 BUDGETS: dict[str, Budget] = {
     "_micro": Budget("_micro", episodes=3, long_episodes=4, eval_episodes=2, seeds=2, scenario="small"),
-    "tiny": Budget("tiny", episodes=20, long_episodes=28, eval_episodes=5, seeds=2, scenario="small"),
+    "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small"),
     "reduced": Budget("reduced", episodes=200, long_episodes=280, eval_episodes=20, seeds=3, scenario="small"),
     "default": Budget("default", episodes=50, long_episodes=70, eval_episodes=20, seeds=3),
     "small": Budget("small", episodes=200, long_episodes=280, eval_episodes=20, seeds=3),
@@ -325,8 +326,34 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def _evaluation_record(result: Any, n_trajectories: int) -> dict[str, Any]:
+def check_budget(spec: RunSpec) -> None:
+    """
+    :param spec: a run on a mission env
+    :raises ValueError: when its budget cannot train: at most ``episodes x mission.max_steps`` env steps (or
+        ``timesteps``), no more than the algorithm's ``learning_starts`` (:func:`sb3_dtdpg.baselines.check_training_budget`)
+    """
+    import gymnasium as gym
+
+    from noma_radiomap import load_scenario
+    from sb3_dtdpg.baselines import check_training_budget, hyperparameter
+
+    learning_starts = int(hyperparameter(spec.algo, "learning_starts", spec.hyperparams))
+    if spec.timesteps is not None:
+        check_training_budget(spec.timesteps, learning_starts, f"{spec.timesteps} env steps ({spec.run_id})")
+        return
+    scenario = spec.scenario or gym.spec(spec.env_id).kwargs.get("scenario", "mall")
+    max_steps = int(load_scenario(scenario).mission.max_steps)
+    check_training_budget(
+        spec.episodes * max_steps,
+        learning_starts,
+        f"{spec.episodes} episodes of at most {max_steps} steps ({spec.run_id})",
+        "train for more episodes (a larger budget)",
+    )
+
+
+def _evaluation_record(result: Any, n_trajectories: int, reward_phase: str) -> dict[str, Any]:
     return {
+        "reward_phase": reward_phase,
         "summary": result.summary(),
         "episodes": result.episodes,
         "trajectories": [np.round(t, 3).tolist() for t in result.trajectories[:n_trajectories]],
@@ -443,6 +470,10 @@ def run_one(
     """
     Train, save and evaluate one run; the result is written to :func:`result_path` last.
 
+    The run is evaluated on the reward phase it finished training on (DT-DPG: its last phase's, ``mqi``; the
+    baselines: ``combined``), the network saved before the transfer on the first phase's; the result records
+    them (``reward_phases``, and ``reward_phase`` in each evaluation record).
+
     The model trains for ``spec.episodes`` episodes (``StopTrainingOnMaxEpisodes``; or ``spec.timesteps``
     timesteps), logging to TensorBoard in ``<tensorboard_dir>/<run_id>`` (SB3's scalars and the ``mission/*``
     ones). DT-DPG also saves its network at the end of the destination phase (the paper's theta_X), which is
@@ -464,6 +495,7 @@ def run_one(
     :param verbose: SB3 verbosity
     :return: the result (as written)
     :raises RunMismatchError: with ``resume``, a stored result or checkpoint is another run's
+    :raises ValueError: when the budget cannot train (:func:`check_budget`)
     """
     import torch as th
     from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
@@ -473,6 +505,7 @@ def run_one(
     from sb3_dtdpg.baselines import algorithm_class, make_env, make_model, mission_callbacks
     from sb3_dtdpg.evaluation import evaluate
 
+    check_budget(spec)
     if threads is not None:
         th.set_num_threads(threads)  # one core per run: runs are parallel across processes
     out = Path(out)
@@ -536,9 +569,15 @@ def run_one(
         )
     train_s = time.perf_counter() - start
     atomic_write(run_dir / "model.zip", model.save)
+    curriculum = getattr(model, "curriculum_state", None)
+    if curriculum is not None:
+        trained_on = list(dict.fromkeys(entry.get("reward_phase") for entry in curriculum["history"]))
+    else:
+        trained_on = [env.unwrapped.reward_phase]
+    final_reward_phase = env.unwrapped.reward_phase
     env.close()
 
-    def _evaluate(policy: Any) -> Any:
+    def _evaluate(policy: Any, reward_phase: str) -> Any:
         return evaluate(
             policy,
             spec.env_id,
@@ -546,7 +585,7 @@ def run_one(
             seed=spec.eval_seed,
             channel=spec.eval_channel,
             multiple_access=spec.multiple_access,
-            env_kwargs=spec.env_kwargs,
+            env_kwargs={**spec.env_kwargs, "reward_phase": reward_phase},
             return_trajectories=True,
         )
 
@@ -562,15 +601,17 @@ def run_one(
             "wall_s": train_s,
             "steps_per_s": model.num_timesteps / max(train_s, 1e-9),
         },
-        "eval": _evaluation_record(_evaluate(model), n_trajectories),
+        "reward_phases": {"trained": trained_on, "evaluated": final_reward_phase},
+        "eval": _evaluation_record(_evaluate(model, final_reward_phase), n_trajectories, final_reward_phase),
     }
     before = sorted(run_dir.glob("phase_*_destination.zip"))
     if before and spec.eval_before_transfer:
         load_env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
         phase_1 = algorithm_class(spec.algo).load(before[0], env=load_env, device="cpu")
-        result["before_transfer"] = _evaluation_record(_evaluate(phase_1), n_trajectories)
+        phase_1_reward = trained_on[0]
+        result["before_transfer"] = _evaluation_record(_evaluate(phase_1, phase_1_reward), n_trajectories, phase_1_reward)
         load_env.close()
-    result["curriculum_state"] = getattr(model, "curriculum_state", None)
+    result["curriculum_state"] = curriculum
     _write_json(result_path(out, spec), result)
     # The result supersedes the checkpoints (the replay buffer can be large).
     (run_dir / "checkpoint.json").unlink(missing_ok=True)

@@ -1,0 +1,140 @@
+"""The ``sb3-dtdpg`` options: one-line user errors, help for every option, old spellings, any env id for train."""
+
+import argparse
+import importlib
+import sys
+from importlib.metadata import version
+
+import pytest
+
+from sb3_dtdpg.cli import build_parser, main
+from sb3_dtdpg.experiments.reproduce import reproduce_specs
+from sb3_dtdpg.experiments.runs import BUDGETS
+
+
+def run_cli(argv, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    return exit_info.value.code, capsys.readouterr()
+
+
+def subcommands(parser):
+    (action,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return action.choices
+
+
+def test_version_comes_from_the_package_metadata(capsys):
+    import sb3_dtdpg
+
+    code, printed = run_cli(["--version"], capsys)
+    assert code == 0
+    assert printed.out.strip() == f"sb3-dtdpg {version('sb3-dtdpg')}" == f"sb3-dtdpg {sb3_dtdpg.__version__}"
+
+
+@pytest.fixture
+def bad_yaml(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("name: broken\nroom: [1, 2\n")
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["map", "--scenario", "atlantis"], "scenario 'atlantis': unknown built-in name"),
+        (["map", "--scenario", "BAD_YAML"], "broken.yaml"),
+        (["train", "--algo", "ddpg", "--scenario", "atlantis"], "unknown built-in name"),
+        (["compare", "--scenario", "BAD_YAML"], "broken.yaml"),
+        (["train", "--algo", "ddpg", "--env", "NoSuchEnv-v0"], "'NoSuchEnv-v0' is not a registered env id"),
+        (["train", "--algo", "ddpg", "--env", "Pendulum-v1", "--multiple-access", "oma"], "apply to the mission envs only"),
+        (["train", "--algo", "td3", "--hyperparams", "tuned"], "defined for 'dtdpg' and 'ddpg' only"),
+        (["train", "--algo", "dtdpg", "--hyperparams", "tuned", "--timesteps", "500"], "learning_starts=2000"),
+        (["compare", "--env", "Pendulum-v1"], "compare runs on the NomaRadioMap envs"),
+        (["compare", "--budget", "_micro", "--hyperparams", "tuned"], "3 episodes of at most 60 steps"),
+        (["compare", "--budget", "_micro"], "cannot train"),  # tuned is the default
+        (["reproduce", "--budget", "_micro"], "cannot train: the first gradient step comes after learning_starts=2000"),
+        (["compare", "--n-seeds", "two"], "expected a positive integer, got 'two'"),
+    ],
+)
+def test_user_errors_are_one_line_with_status_2(argv, message, bad_yaml, capsys):
+    code, printed = run_cli([bad_yaml if a == "BAD_YAML" else a for a in argv], capsys)
+    assert code == 2
+    assert "Traceback" not in printed.err
+    errors = [line for line in printed.err.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith(f"sb3-dtdpg {argv[0]}: error: ")
+    assert message in errors[0]
+
+
+def test_every_option_has_help():
+    parser = build_parser()
+    missing = []
+    for name, sub in {"": parser, **subcommands(parser)}.items():
+        for action in sub._actions:
+            if action.help is None or (action.help == argparse.SUPPRESS and "deprecated" not in type(action).__name__.lower()):
+                missing.append(f"{name} {'/'.join(action.option_strings) or action.dest}")
+    assert not missing
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "dest", "value"),
+    [
+        (["compare", "--seeds", "2"], ["compare", "--n-seeds", "2"], "n_seeds", 2),
+        (["reproduce", "--seeds", "2"], ["reproduce", "--n-seeds", "2"], "n_seeds", 2),
+        (["compare", "--modes", "oma"], ["compare", "--multiple-access", "oma"], "multiple_access", ["oma"]),
+    ],
+)
+def test_old_spellings_still_work_and_say_so(old, new, dest, value, capsys):
+    assert getattr(build_parser().parse_args(new), dest) == value
+    assert capsys.readouterr().err == ""
+    assert getattr(build_parser().parse_args(old), dest) == value
+    assert f"{old[1]} is deprecated, use {new[1]}" in capsys.readouterr().err
+
+
+def test_out_is_a_folder_everywhere():
+    for name, sub in subcommands(build_parser()).items():
+        (out,) = [a for a in sub._actions if "--out" in a.option_strings]
+        assert "folder" in out.help, name
+
+
+def test_reproduce_defaults_to_a_budget_of_minutes():
+    budget = BUDGETS[build_parser().parse_args(["reproduce"]).budget]
+    specs = {s.run_id: s for specs in reproduce_specs(budget, budget.seeds).values() for s in specs}
+    steps = sum(spec.episodes for spec in specs.values()) * 60  # `small`: at most 60 steps an episode
+    assert budget.scenario == "small" and steps <= 50_000, "at a few hundred steps/s per core, minutes"
+    assert "--budget paper" in subcommands(build_parser())["reproduce"].format_help()
+
+
+def test_train_works_with_any_registered_env(tmp_path, capsys):
+    args = ["train", "--algo", "dtdpg", "--hyperparams", "paper", "--env", "Pendulum-v1", "--timesteps", "300"]
+    args += ["--eval-episodes", "1", "--no-progress"]
+    assert main([*args, "--tb", str(tmp_path / "tb"), "--out", str(tmp_path / "models")]) == 0
+    assert (tmp_path / "models" / "dtdpg_Pendulum-v1_s0.zip").exists()
+    assert "dtdpg_Pendulum-v1_s0: 300 steps; test (1 episodes): reward" in capsys.readouterr().out
+
+
+def test_train_on_a_mission_env_evaluates_on_its_last_reward_phase(tmp_path, capsys):
+    args = ["train", "--algo", "ddpg", "--hyperparams", "paper", "--env", "NomaRadioMapOMA-v0", "--scenario", "small"]
+    args += ["--episodes", "2", "--eval-episodes", "1", "--no-progress", "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]
+    assert main(args) == 0
+    # the env id's own mode (OMA) when --multiple-access is not given
+    assert (tmp_path / "runs" / "ddpg_oma_s0" / "model.zip").exists()
+    assert "last reward phase 'combined'; test (1 Rayleigh episodes, 'combined' reward)" in capsys.readouterr().out
+
+
+def test_hyperparams_default_to_the_tuned_set_where_every_algorithm_has_it(capsys):
+    train = ["train", "--episodes", "1", "--scenario", "small"]  # 60 steps: the budget check stops it before training
+    code, printed = run_cli([*train, "--algo", "ddpg"], capsys)
+    assert code == 2 and "learning_starts=2000" in printed.err  # tuned
+    code, printed = run_cli([*train, "--algo", "td3"], capsys)
+    assert code == 2 and "learning_starts=100" in printed.err  # TD3 has no tuned set: SB3's defaults, no error about it
+
+
+@pytest.mark.parametrize("script", ["train", "enjoy"])
+def test_zoo_scripts_without_the_zoo_extra_say_what_to_install(script, monkeypatch):
+    monkeypatch.setitem(sys.modules, "rl_zoo3", None)  # as if rl_zoo3 were not installed
+    monkeypatch.delitem(sys.modules, "sb3_dtdpg.zoo", raising=False)
+    with pytest.raises(SystemExit) as exit_info:
+        importlib.import_module(f"sb3_dtdpg.{script}").main()
+    message = str(exit_info.value.code)
+    assert message.startswith(f"python -m sb3_dtdpg.{script}: error: ") and "\n" not in message
+    assert "'zoo' extra (rl_zoo3 is not installed)" in message and 'pip install "sb3-dtdpg[zoo]"' in message
