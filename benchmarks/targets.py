@@ -51,7 +51,7 @@ def run(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from sb3_dtdpg.baselines import make_model, reward_phase
-    from sb3_dtdpg.common.phases import default_phases
+    from sb3_dtdpg.missions import default_phases
     from sb3_dtdpg.evaluation import evaluate
 
     th.set_num_threads(1)
