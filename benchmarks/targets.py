@@ -51,8 +51,8 @@ def run(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from sb3_dtdpg.baselines import make_model, reward_phase
-    from sb3_dtdpg.missions import default_phases
     from sb3_dtdpg.evaluation import evaluate
+    from sb3_dtdpg.missions import default_phases
 
     th.set_num_threads(1)
     env = _make_env(args.env, args.observation, reward_phase=reward_phase(method), **args.env_kwargs)

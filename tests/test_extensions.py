@@ -99,5 +99,5 @@ def test_goal_observation_through_gymnasium_make():
     assert env.spec.max_episode_steps == 60
     plain_obs, _ = _small().reset(seed=1)
     np.testing.assert_array_equal(obs[:12], plain_obs)
-    with pytest.raises(ValueError, match="observation must be one of .*'relative'"):
+    with pytest.raises(ValueError, match=r"observation must be one of .*'relative'"):
         gym.make("NomaRadioMap-v0", observation="relative")

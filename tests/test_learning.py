@@ -52,8 +52,8 @@ def test_default_hyperparameters_learn_the_small_mission():
     (seed 0) and 45 % (seed 1) of the missions after 10k steps, Table I's values (lr 1e-4, batch 64, tau 0.002,
     buffer 5e4, gamma 0.99) in 0 % on both seeds. The threshold sits between the two.
     """
-    from sb3_dtdpg.missions import default_phases
     from sb3_dtdpg.evaluation import evaluate
+    from sb3_dtdpg.missions import default_phases
 
     env = gym.make("NomaRadioMap-v0", scenario="small")
     model = DTDPG("MlpPolicy", env, seed=0, phases=default_phases(destination_episodes=150)).learn(10_000)
