@@ -90,3 +90,14 @@ def test_demonstrations_need_one_env():
         model.learn(4, callback=DemonstrationCallback(ShortestPathPlanner(), n_episodes=1))
     with pytest.raises(ValueError, match="n_episodes"):
         DemonstrationCallback(ShortestPathPlanner(), n_episodes=0)
+
+
+def test_goal_observation_through_gymnasium_make():
+    env = gym.make("NomaRadioMap-v0", scenario="small", observation="goal")
+    obs, _ = env.reset(seed=1)
+    assert obs.shape == (18,) and env.observation_space.shape == (18,)
+    assert env.spec.max_episode_steps == 60
+    plain_obs, _ = _small().reset(seed=1)
+    np.testing.assert_array_equal(obs[:12], plain_obs)
+    with pytest.raises(ValueError, match=r"observation must be one of .*'relative'"):
+        gym.make("NomaRadioMap-v0", observation="relative")

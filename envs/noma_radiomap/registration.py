@@ -28,16 +28,30 @@ ENV_IDS: dict[str, dict[str, str]] = {
 }
 
 
-def make_env(**kwargs: Any) -> gym.Env:
+#: Observation layouts of :func:`make_env`: the paper's (the env's own) and the goal-conditioned extension.
+OBSERVATIONS: tuple[str, ...] = ("paper", "goal")
+
+
+def make_env(observation: str = "paper", **kwargs: Any) -> gym.Env:
     """
     The entry point of the registered ids: :class:`NomaRadioMapEnv` in a ``TimeLimit`` of its scenario's
     ``mission.max_steps``.
 
+    :param observation: ``"paper"`` (the paper's state, ``6U`` values) or ``"goal"`` (the goal-conditioned
+        extension: :class:`noma_radiomap.wrappers.RelativeGoalObservation` adds each robot's direction and
+        distance to its destination, ``9U`` values; docs/BENCHMARKS.md measures what it changes)
     :param kwargs: the arguments of :class:`NomaRadioMapEnv`
     :return: the wrapped env
     """
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
     env = NomaRadioMapEnv(**kwargs)
-    return TimeLimit(env, max_episode_steps=env.max_steps)
+    wrapped: gym.Env = TimeLimit(env, max_episode_steps=env.max_steps)
+    if observation == "goal":
+        from noma_radiomap.wrappers import RelativeGoalObservation
+
+        wrapped = RelativeGoalObservation(wrapped)
+    return wrapped
 
 
 # gymnasium.make reads the creator's render modes from here, as it does from an env class
