@@ -453,8 +453,17 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         return state
 
     # --- missions --------------------------------------------------------------------------------
-    def _draw_mission(self, options: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
-        """Starts and destinations (U, 2) each: drawn from the scenario, or given in the reset options."""
+    def _draw_mission(
+        self, options: dict[str, Any] | None, rng: np.random.Generator | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Starts and destinations (U, 2) each: drawn from the scenario, or given in the reset options.
+
+        :param options: the reset options
+        :param rng: the generator to draw from (None: the env's ``np_random``; the vector env passes each
+            mission's own)
+        """
+        rng = self.np_random if rng is None else rng
         options = {} if options is None else dict(options)
         unknown = set(options) - {"starts", "destinations"}
         if unknown:
@@ -464,12 +473,12 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         if destinations is None:
             destinations = np.empty((self.n_robots, 2))
             for u, choices in enumerate(self._mission_choices):
-                destinations[u] = choices[self.np_random.integers(len(choices))][0]
+                destinations[u] = choices[rng.integers(len(choices))][0]
         if starts is None:
             starts = np.empty((self.n_robots, 2))
             for u, choices in enumerate(self._mission_choices):
                 candidates = self._start_candidates(u, destinations[u], choices)
-                starts[u] = candidates[self.np_random.integers(len(candidates))]
+                starts[u] = candidates[rng.integers(len(candidates))]
         self._check_mission(starts, destinations)
         return starts, destinations
 
