@@ -172,9 +172,10 @@ class GridMotion:
                 clear = self._box_clear(x, y, x + n_substeps * sx, y + n_substeps * sy)
                 for _ in range(n_substeps):
                     # Products rather than ** 2 (C pow): move_batch computes the same bits with numpy.
-                    if goals is not None and (x - goals[u][0]) * (x - goals[u][0]) + (y - goals[u][1]) * (
-                        y - goals[u][1]
-                    ) <= radius_sq:
+                    if (
+                        goals is not None
+                        and (x - goals[u][0]) * (x - goals[u][0]) + (y - goals[u][1]) * (y - goals[u][1]) <= radius_sq
+                    ):
                         break
                     if clear:
                         x, y = x + sx, y + sy

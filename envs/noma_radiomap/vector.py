@@ -77,7 +77,9 @@ class MissionView:
 
     def episode_summary(self) -> dict[str, Any]:
         summary = self._vec.episode_summaries(np.array([self._index]))
-        return {key: value[0] if key in ("mission_time", "outage_steps") else value[0].item() for key, value in summary.items()}
+        return {
+            key: value[0] if key in ("mission_time", "outage_steps") else value[0].item() for key, value in summary.items()
+        }
 
     @property
     def positions(self) -> np.ndarray:
@@ -227,20 +229,23 @@ class NomaRadioMapVecEnv(VectorEnv):
         return [int(i) for i in indices]
 
     # --- the batched engine (also driven by the SB3 face) ----------------------------------------
-    def reset_missions(self, rows: np.ndarray, seeds: list[int | None] | None = None, options: dict | None = None) -> None:
+    def reset_missions(
+        self, rows: np.ndarray, seeds: list[int | None] | None = None, options: dict | list[dict | None] | None = None
+    ) -> None:
         """
         Reset some missions: as :meth:`NomaRadioMapEnv.reset` on each, with its own generator.
 
         :param rows: the missions to reset
         :param seeds: a seed per row (None entries keep the generator going)
-        :param options: the single env's reset options, for every row
+        :param options: the single env's reset options, for every row or one per row
         """
         env = self.template
         for k, i in enumerate(rows):
             seed = None if seeds is None else seeds[k]
             if seed is not None:
                 self.np_randoms[i] = seeding.np_random(seed)[0]
-            starts, destinations = env._draw_mission(options, self.np_randoms[i])
+            row_options = options[k] if isinstance(options, list) else options
+            starts, destinations = env._draw_mission(row_options, self.np_randoms[i])
             self.positions[i], self.destinations[i] = starts, destinations
         self.arrived[rows] = False
         self.step_counts[rows] = 0
@@ -323,7 +328,12 @@ class NomaRadioMapVecEnv(VectorEnv):
         """The observations of some missions, (rows, 6U) float32."""
         env = self.template
         return mission_observation(
-            self.positions[rows], self.destinations[rows], self._gain_db[rows], self.arrived[rows], env._room_size, env.GAIN_DB_RANGE
+            self.positions[rows],
+            self.destinations[rows],
+            self._gain_db[rows],
+            self.arrived[rows],
+            env._room_size,
+            env.GAIN_DB_RANGE,
         )
 
     def episode_summaries(self, rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -333,10 +343,17 @@ class NomaRadioMapVecEnv(VectorEnv):
         mission_time = np.where(arrived, self._arrival_step[rows], self.max_steps).astype(np.int64)
         outage_steps = self._outage_steps[rows].copy()
         mqi = rewards.mission_quality_indicator(mission.t_total, mission_time, outage_steps, mission.outage_penalty)
-        return {"is_success": arrived.all(axis=-1), "mqi": np.asarray(mqi, dtype=np.float64), "mission_time": mission_time, "outage_steps": outage_steps}
+        return {
+            "is_success": arrived.all(axis=-1),
+            "mqi": np.asarray(mqi, dtype=np.float64),
+            "mission_time": mission_time,
+            "outage_steps": outage_steps,
+        }
 
     # --- Gymnasium VectorEnv API -----------------------------------------------------------------
-    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict]:
         options = dict(options or {})
         mask = options.pop("reset_mask", None)
         rows = np.arange(self.num_envs) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
