@@ -229,7 +229,7 @@ def test_study_workers_share_the_runs(tmp_path):
     from sb3_dtdpg.experiments.distributed import run_study_worker, study_specs
     from sb3_dtdpg.experiments.runs import result_path
 
-    specs = study_specs("compare", "smoke", seeds=2)
+    specs = study_specs("compare", "tiny", seeds=2)
     ran = []
 
     def fake_run(spec, out):
