@@ -171,7 +171,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results/train", help="where the model is saved (default: results/train)")
     p.add_argument("--eval-episodes", type=_positive, default=20)
     p.add_argument("--eval-seed", type=int, default=10_000)
-    p.add_argument("--threads", type=int, default=0, help="torch threads (default: torch's)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads (default: 1, fastest for these small networks; 0: torch's default)",
+    )
     p.add_argument("--verbose", type=int, default=0)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_cmd_train)
