@@ -154,6 +154,12 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     ``destinations`` (U, 2), ``arrived`` (U,), ``step_count``, ``trajectory`` (steps + 1, U, 2),
     ``reward_phase``; :meth:`reward_weights`, :meth:`set_reward_phase`, :meth:`episode_summary`.
 
+    ## Vector env
+
+    ``gymnasium.make_vec("NomaRadioMap-v0", num_envs=N)`` steps N missions at once
+    (:class:`noma_radiomap.vector.NomaRadioMapVecEnv`, the same transitions as N single envs seeded
+    ``seed + i``); for Stable-Baselines3, ``sb3_dtdpg.vec_env.make_mission_vec_env`` (docs/SCALING.md).
+
     ## Version History
 
     * v0: Initial release.
