@@ -174,7 +174,7 @@ def test_dtdpg_curriculum_on_the_vector_env(tmp_path, n_envs):
     env = make_mission_vec_env(n_envs=n_envs, seed=0, env_kwargs={"scenario": "small", "max_episode_steps": 10})
     phases = [
         Phase("destination", n_episodes=5, sigma=0.5, final_sigma=0.1, decay_episodes=6),
-        Phase("mqi", sigma=0.3, final_sigma=0.05, replay_handling="relabel"),
+        Phase("mqi", sigma=0.3, final_sigma=0.05, decay_episodes=10, replay_handling="relabel"),
     ]
     model = DTDPG(
         "MlpPolicy",

@@ -64,7 +64,7 @@ def run_study_worker(
     :param study_name: the study shared by the workers of one job
     :param n_runs: stop after this many runs (None: until the grid is exhausted)
     :param run: the function that runs one spec (tests pass a cheap one)
-    :return: the run ids this worker ran or found finished
+    :return: the run ids this worker ran (a run found finished is not run again)
     """
     import optuna
 
@@ -77,13 +77,16 @@ def run_study_worker(
     sampler = optuna.samplers.GridSampler({"run": indices}, seed=0)
     study = optuna.create_study(storage=storage, study_name=study_name, sampler=sampler, load_if_exists=True)
     done: list[str] = []
+    taken = {trial.params.get("run") for trial in study.get_trials(deepcopy=False) if trial.state.is_finished()}
+    if taken >= set(indices):
+        return done  # every run was handed out (GridSampler would re-run one)
 
     def objective(trial: optuna.Trial) -> float:
         spec = specs[trial.suggest_categorical("run", indices)]
         trial.set_user_attr("run_id", spec.run_id)
         if load_result(out, spec) is None:
             run(spec, out)
-        done.append(spec.run_id)
+            done.append(spec.run_id)
         return 0.0
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
