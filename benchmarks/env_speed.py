@@ -6,9 +6,14 @@ CPU time, rounds alternate between the envs and each env's best round is kept (l
 the ratios robust to other load on a shared machine.
 Bars: >= 0.3x Pendulum-v1 in ``radio_map`` mode, >= 0.25x in ``rayleigh`` mode.
 
+Vector envs (same run, same way): SB3's ``DummyVecEnv`` of 16 single envs (``gymnasium.make``) against the
+batched SB3 face ``sb3_dtdpg.vec_env.MissionVecEnv`` with 16 and more missions, and Gymnasium's
+``gymnasium.make_vec`` (the batched ``NomaRadioMapVecEnv``); steps/s count env steps (N per vector step),
+actions are uniform random batches. Bar: the batched env >= 10x the ``DummyVecEnv``.
+
 Also prints the radio-map build figures of ``benchmarks/radiomap_build.py`` when that script exists.
 
-Usage: ``python benchmarks/env_speed.py [--steps 5000] [--rounds 5]``
+Usage: ``python benchmarks/env_speed.py [--steps 5000] [--rounds 5] [--vec-steps 20000]``
 """
 
 import argparse
@@ -17,6 +22,8 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 import noma_radiomap  # noqa: F401  (registers the ids)
 
@@ -27,6 +34,55 @@ CASES: dict[str, tuple[str, dict]] = {
     "NomaRadioMapOMA-v0 (radio_map, OMA)": ("NomaRadioMapOMA-v0", {}),
 }
 BARS = {"NomaRadioMap-v0 (radio_map, NOMA)": 0.3, "NomaRadioMapReality-v0 (rayleigh, NOMA)": 0.25}
+VEC_REFERENCE = "DummyVecEnv, 16 single envs"
+VEC_BAR = 10.0
+
+
+def vec_cases() -> dict[str, object]:
+    """The vector envs compared (NomaRadioMap-v0: mall, NOMA, radio_map)."""
+    from sb3_dtdpg.vec_env import MissionVecEnv
+
+    return {
+        VEC_REFERENCE: DummyVecEnv([lambda: gym.make("NomaRadioMap-v0")] * 16),
+        "MissionVecEnv (SB3), N = 16": MissionVecEnv.from_id("NomaRadioMap-v0", 16),
+        "MissionVecEnv (SB3), N = 64": MissionVecEnv.from_id("NomaRadioMap-v0", 64),
+        "MissionVecEnv (SB3), N = 256": MissionVecEnv.from_id("NomaRadioMap-v0", 256),
+        "gymnasium.make_vec, N = 64": gym.make_vec("NomaRadioMap-v0", num_envs=64),
+        "MissionVecEnv (SB3), rayleigh, N = 64": MissionVecEnv.from_id("NomaRadioMapReality-v0", 64),
+    }
+
+
+def vec_steps_per_second(env: object, n_steps: int, rng: np.random.Generator) -> float:
+    """Env steps (N per vector step) per CPU second of this process, random actions, auto-reset."""
+    n = env.num_envs
+    n_calls = max(1, n_steps // n)
+    actions = rng.uniform(-1.0, 1.0, (n_calls, n, *env.action_space.shape[-1:])).astype(np.float32)
+    start = time.process_time()
+    for action in actions:
+        env.step(action)
+    return n_calls * n / (time.process_time() - start)
+
+
+def run_vec_benchmark(n_steps: int = 20000, n_rounds: int = 5) -> dict[str, float]:
+    """
+    :param n_steps: env steps per round (rounded down to whole vector steps)
+    :param n_rounds: alternating rounds; the best round of each env counts
+    :return: best env steps/s per case
+    """
+    rng = np.random.default_rng(0)
+    envs = vec_cases()
+    for env in envs.values():
+        if isinstance(env, gym.vector.VectorEnv):
+            env.reset(seed=0)
+        else:
+            env.seed(0)
+            env.reset()
+        vec_steps_per_second(env, 2000, rng)  # warm-up
+    best = dict.fromkeys(envs, 0.0)
+    for _ in range(n_rounds):
+        for name, env in envs.items():
+            best[name] = max(best[name], vec_steps_per_second(env, n_steps, rng))
+    return best
 
 
 def steps_per_second(env: gym.Env, n_steps: int) -> float:
@@ -63,6 +119,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=5000, help="steps per round")
     parser.add_argument("--rounds", type=int, default=5, help="alternating rounds (best kept)")
+    parser.add_argument("--vec-steps", type=int, default=20000, help="env steps per round of the vector envs (0: skip)")
     args = parser.parse_args()
 
     best = run_env_benchmark(args.steps, args.rounds)
@@ -72,6 +129,15 @@ def main() -> None:
         bar = BARS.get(name)
         verdict = "" if bar is None else f">={bar:.2f} {'ok' if rate / reference >= bar else 'FAIL'}"
         print(f"{name:<42} {rate:>10.0f} {rate / reference:>7.3f} {verdict:>6}")
+
+    if args.vec_steps > 0:
+        vec_best = run_vec_benchmark(args.vec_steps, args.rounds)
+        vec_reference = vec_best[VEC_REFERENCE]
+        print(f"\n{'vector env (NomaRadioMap-v0)':<42} {'steps/s':>10} {'ratio':>7} {'bar':>6}")
+        for name, rate in vec_best.items():
+            ratio = rate / vec_reference
+            verdict = "" if name == VEC_REFERENCE else f">={VEC_BAR:.0f} {'ok' if ratio >= VEC_BAR else 'FAIL'}"
+            print(f"{name:<42} {rate:>10.0f} {ratio:>7.2f} {verdict:>6}")
 
     build_script = Path(__file__).with_name("radiomap_build.py")
     if build_script.exists():

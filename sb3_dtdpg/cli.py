@@ -427,7 +427,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--eval-episodes", type=_positive, default=20, help="test episodes after training (default: 20)")
     p.add_argument("--eval-seed", type=int, default=10_000, help="seed of the first test episode (default: 10000)")
-    p.add_argument("--threads", type=int, default=0, help="torch threads (default: torch's)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads (default: 1, fastest for these small networks; 0: torch's default)",
+    )
     p.add_argument("--verbose", type=int, default=0, help="SB3 verbosity: 0, 1 or 2 (default: 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)

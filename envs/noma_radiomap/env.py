@@ -157,6 +157,12 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     ``destinations`` (U, 2), ``arrived`` (U,), ``step_count``, ``trajectory`` (steps + 1, U, 2),
     ``reward_phase``; :meth:`reward_weights`, :meth:`set_reward_phase`, :meth:`episode_summary`.
 
+    ## Vector env
+
+    ``gymnasium.make_vec("NomaRadioMap-v0", num_envs=N)`` steps N missions at once
+    (:class:`noma_radiomap.vector.NomaRadioMapVecEnv`, the same transitions as N single envs seeded
+    ``seed + i``); for Stable-Baselines3, ``sb3_dtdpg.vec_env.make_mission_vec_env`` (docs/SCALING.md).
+
     ## Version History
 
     * v0: Initial release.
@@ -456,8 +462,17 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         return state
 
     # --- missions --------------------------------------------------------------------------------
-    def _draw_mission(self, options: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
-        """Starts and destinations (U, 2) each: drawn from the scenario, or given in the reset options."""
+    def _draw_mission(
+        self, options: dict[str, Any] | None, rng: np.random.Generator | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Starts and destinations (U, 2) each: drawn from the scenario, or given in the reset options.
+
+        :param options: the reset options
+        :param rng: the generator to draw from (None: the env's ``np_random``; the vector env passes each
+            mission's own)
+        """
+        rng = self.np_random if rng is None else rng
         options = {} if options is None else dict(options)
         unknown = set(options) - {"starts", "destinations"}
         if unknown:
@@ -467,12 +482,12 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         if destinations is None:
             destinations = np.empty((self.n_robots, 2))
             for u, choices in enumerate(self._mission_choices):
-                destinations[u] = choices[self.np_random.integers(len(choices))][0]
+                destinations[u] = choices[rng.integers(len(choices))][0]
         if starts is None:
             starts = np.empty((self.n_robots, 2))
             for u, choices in enumerate(self._mission_choices):
                 candidates = self._start_candidates(u, destinations[u], choices)
-                starts[u] = candidates[self.np_random.integers(len(candidates))]
+                starts[u] = candidates[rng.integers(len(candidates))]
         self._check_mission(starts, destinations)
         return starts, destinations
 

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from noma_radiomap import geometry
 from noma_radiomap.scenario import Room
 
 _TINY = float(np.finfo(np.float64).tiny)
@@ -42,9 +43,11 @@ class GridMotion:
     component along it is kept (if both single-axis moves are free, at a corner, the larger one is kept).
     A robot that comes within ``arrival_radius`` of its destination stops there (it has arrived).
 
-    The sub-step loop runs over plain Python floats: with a handful of robots and 2-4 sub-steps it is
-    several times faster than numpy calls on arrays of two elements (the env's speed budget,
-    ``benchmarks/env_speed.py``).
+    :meth:`move` runs the sub-step loop over plain Python floats: with a handful of robots and 2-4 sub-steps it
+    is several times faster than numpy calls on arrays of two elements (the env's speed budget,
+    ``benchmarks/env_speed.py``). :meth:`move_batch` applies the same rules to many missions at once with
+    numpy, looping over the sub-steps only (the vector env); a property test checks that both give the same
+    bits.
     When the bounding box of a whole move holds no blocked cell (a summed-area table lookup), the
     collision tests are skipped: the result is the same, since no sub-step can then enter a blocked cell.
 
@@ -78,6 +81,7 @@ class GridMotion:
         table = np.zeros((self._nx + 1, self._ny + 1), dtype=np.int64)
         table[1:, 1:] = blocked.cumsum(axis=0).cumsum(axis=1)
         self._blocked_count: list[list[int]] = table.tolist()
+        self._blocked_table = table
         self._point_cell = room.point_cell
         self._n_substeps = max(1, math.ceil(self.max_step / (0.5 * self.resolution) - 1e-9))
 
@@ -147,7 +151,7 @@ class GridMotion:
             destination at the end of the step (all False when ``destinations`` is None)
         """
         max_step, n_substeps = self.max_step, self._n_substeps
-        radius_sq = self.arrival_radius**2
+        radius_sq = self.arrival_radius * self.arrival_radius
         points = np.asarray(positions, dtype=float).tolist()
         moves = np.asarray(actions, dtype=float).tolist()
         active_list = [True] * len(points) if active is None else np.asarray(active, dtype=bool).tolist()
@@ -167,7 +171,11 @@ class GridMotion:
                 # Fast path: no blocked cell and no wall in the box around the whole move -> no collision test.
                 clear = self._box_clear(x, y, x + n_substeps * sx, y + n_substeps * sy)
                 for _ in range(n_substeps):
-                    if goals is not None and (x - goals[u][0]) ** 2 + (y - goals[u][1]) ** 2 <= radius_sq:
+                    # Products rather than ** 2 (C pow): move_batch computes the same bits with numpy.
+                    if (
+                        goals is not None
+                        and (x - goals[u][0]) * (x - goals[u][0]) + (y - goals[u][1]) * (y - goals[u][1]) <= radius_sq
+                    ):
                         break
                     if clear:
                         x, y = x + sx, y + sy
@@ -175,5 +183,84 @@ class GridMotion:
                         x, y, cell = self._step(x, y, cell, sx, sy)
                 points[u] = [x, y]
             if goals is not None:
-                arrived[u] = (x - goals[u][0]) ** 2 + (y - goals[u][1]) ** 2 <= radius_sq
+                arrived[u] = (x - goals[u][0]) * (x - goals[u][0]) + (y - goals[u][1]) * (y - goals[u][1]) <= radius_sq
         return np.array(points, dtype=float).reshape(-1, 2), np.array(arrived, dtype=bool)
+
+    def _free_cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_cell` on arrays: whether each point is free, and its cell indices (clipped to the grid)."""
+        inside = (x >= 0.0) & (x < self.width) & (y >= 0.0) & (y < self.depth)
+        ix, iy = self.room.cell_index(np.stack([x, y], axis=-1))
+        return inside & ~self.blocked[ix, iy], ix, iy
+
+    def _boxes_clear(self, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray, y1: np.ndarray) -> np.ndarray:
+        """:meth:`_box_clear` on arrays."""
+        margin = 1e-9 * (1.0 + self.width + self.depth)
+        low_x, high_x = np.minimum(x0, x1) - margin, np.maximum(x0, x1) + margin
+        low_y, high_y = np.minimum(y0, y1) - margin, np.maximum(y0, y1) + margin
+        inside = (low_x >= 0.0) & (low_y >= 0.0) & (high_x < self.width) & (high_y < self.depth)
+        ix0, iy0 = self.room.cell_index(np.stack([low_x, low_y], axis=-1))
+        ix1, iy1 = self.room.cell_index(np.stack([high_x, high_y], axis=-1))
+        ix1, iy1 = ix1 + 1, iy1 + 1
+        table = self._blocked_table
+        return inside & (table[ix1, iy1] - table[ix0, iy1] - table[ix1, iy0] + table[ix0, iy0] == 0)
+
+    def move_batch(
+        self,
+        positions: np.ndarray,
+        actions: np.ndarray,
+        destinations: np.ndarray,
+        active: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """
+        :meth:`move` for many missions at once: the same rules and the same bits, vectorised over every robot
+        of every mission (a Python loop over the sub-steps only).
+
+        :param positions: current positions, shape (..., U, 2); must be free points
+        :param actions: motion actions in [-1, 1], shape (..., U, 2)
+        :param destinations: destinations, shape (..., U, 2)
+        :param active: which robots move, bool (..., U)
+        :return: the new positions (..., U, 2) and the arrived flags (..., U), as :meth:`move`
+        """
+        positions = np.asarray(positions, dtype=np.float64)
+        x, y = positions[..., 0].copy(), positions[..., 1].copy()
+        gx, gy = np.asarray(destinations, dtype=np.float64)[..., 0], np.asarray(destinations, dtype=np.float64)[..., 1]
+        free, _, _ = self._free_cells(x, y)
+        if not free.all():
+            index = tuple(int(i) for i in np.argwhere(~free)[0])
+            raise ValueError(f"positions{list(index)}: {positions[index].tolist()} is outside the room or in a blocked cell")
+        max_step, n_substeps = self.max_step, self._n_substeps
+        radius_sq = self.arrival_radius * self.arrival_radius
+        step = np.minimum(np.maximum(np.asarray(actions, dtype=np.float64), -1.0), 1.0) * max_step
+        # geometry.distance: math.hypot, as move() uses
+        norm = geometry.distance(step, np.zeros(2))
+        with np.errstate(divide="ignore"):
+            scale = np.where(norm > max_step, max_step / norm / n_substeps, 1.0 / n_substeps)
+        sx, sy = step[..., 0] * scale, step[..., 1] * scale
+        clear = self._boxes_clear(x, y, x + n_substeps * sx, y + n_substeps * sy)
+        moving = np.asarray(active, dtype=bool).copy()
+        for _ in range(n_substeps):
+            moving &= ~((x - gx) * (x - gx) + (y - gy) * (y - gy) <= radius_sq)
+            if not moving.any():
+                break
+            nx_, ny_ = self._substep(x, y, sx, sy, clear)
+            x, y = np.where(moving, nx_, x), np.where(moving, ny_, y)
+        arrived = (x - gx) * (x - gx) + (y - gy) * (y - gy) <= radius_sq
+        return np.stack([x, y], axis=-1), arrived
+
+    def _substep(
+        self, x: np.ndarray, y: np.ndarray, sx: np.ndarray, sy: np.ndarray, clear: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_step` on arrays (``clear``: the fast path, no collision test); returns the new points."""
+        ix, iy = self.room.cell_index(np.stack([x, y], axis=-1))
+        tx, ty = x + sx, y + sy
+        free, nix, niy = self._free_cells(tx, ty)
+        straight = (nix == ix) | (niy == iy)
+        corner_free = ~(self.blocked[nix, iy] | self.blocked[ix, niy])
+        direct = clear | (free & (straight | corner_free))
+        free_x = self._free_cells(tx, y)[0] & (sx != 0.0)
+        free_y = self._free_cells(x, ty)[0] & (sy != 0.0)
+        slide_x = free_x & (~free_y | (np.abs(sx) >= np.abs(sy)))
+        slide_y = ~slide_x & free_y
+        new_x = np.where(direct | slide_x, tx, x)
+        new_y = np.where(direct | slide_y, ty, y)
+        return new_x, new_y

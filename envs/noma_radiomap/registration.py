@@ -8,6 +8,9 @@ Episodes are truncated only by Gymnasium's ``TimeLimit``, at the scenario's ``mi
 point :func:`make_env` builds the env and wraps it in a ``TimeLimit`` of its own scenario's length, so
 ``gymnasium.make("NomaRadioMap-v0", scenario="small").spec.max_episode_steps`` is ``small``'s 60 and the
 default ``mall`` gives 300. ``gymnasium.make(..., max_episode_steps=n)`` adds a shorter limit on top.
+
+``gymnasium.make_vec(env_id, num_envs=N)`` builds the batched :class:`~noma_radiomap.vector.NomaRadioMapVecEnv`
+(the ids' ``vector_entry_point``); ``vectorization_mode="sync"`` gives Gymnasium's ``SyncVectorEnv`` of single envs.
 """
 
 from typing import Any
@@ -18,6 +21,7 @@ from gymnasium.wrappers import TimeLimit
 from noma_radiomap.env import NomaRadioMapEnv
 
 ENTRY_POINT = "noma_radiomap.registration:make_env"
+VECTOR_ENTRY_POINT = "noma_radiomap.vector:make_vec_env"
 
 #: The registered ids and their default kwargs (any kwarg can still be overridden through ``gymnasium.make``).
 ENV_IDS: dict[str, dict[str, str]] = {
@@ -66,5 +70,6 @@ def register_envs() -> None:
         gym.register(
             id=env_id,
             entry_point=ENTRY_POINT,
+            vector_entry_point=VECTOR_ENTRY_POINT,
             kwargs={"scenario": "mall", "reward_phase": "destination", **kwargs},
         )

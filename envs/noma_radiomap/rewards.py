@@ -112,7 +112,8 @@ def weighted_reward(components: Mapping[str, np.ndarray], weights: Mapping[str, 
     The reward ``sum_k weights[k] * components[k]``, summed in the order of ``components``.
 
     :param components: the reward components (:func:`reward_components`), arrays of shape (...)
-    :param weights: a weight per component (:func:`phase_weights`); missing components weigh 0
+    :param weights: a weight per component (:func:`phase_weights`), or an array of weights per mission
+        broadcastable to the components (the vector env); missing components weigh 0
     :return: the reward, shape (...)
     """
     reward = 0.0

@@ -1,0 +1,135 @@
+"""The batched mission env for Stable-Baselines3: :class:`MissionVecEnv`, an SB3 ``VecEnv`` over
+:class:`noma_radiomap.vector.NomaRadioMapVecEnv` (SB3 does not take Gymnasium vector envs).
+
+It behaves as SB3's ``DummyVecEnv`` of N single envs (``gymnasium.make(env_id)``) seeded ``seed + i``, with
+the same transitions, only faster: rewards (float32), dones, ``terminal_observation`` and
+``TimeLimit.truncated`` in the infos, auto-reset on the step an episode ends, ``env_method`` / ``get_attr``
+on each mission (``set_reward_phase``, ``reward_weights``, ...). :func:`make_mission_vec_env` is its
+``make_vec_env``: it adds SB3's ``VecMonitor`` (``info["episode"]`` with ``r``, ``l``, ``t`` and
+``is_success`` for the logger), as ``make_vec_env`` adds a ``Monitor`` to each env.
+"""
+
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecMonitor
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
+
+import noma_radiomap  # noqa: F401  (registers the ids)
+from noma_radiomap.vector import NomaRadioMapVecEnv
+
+
+class MissionVecEnv(VecEnv):
+    """
+    N missions of the NOMA radio-map env as an SB3 ``VecEnv``, stepped at once (:class:`NomaRadioMapVecEnv`).
+
+    :param num_envs: number of missions N
+    :param env_kwargs: the keyword arguments of :class:`~noma_radiomap.NomaRadioMapEnv` (``scenario``,
+        ``multiple_access``, ``channel``, ``reward_phase``, ``inducing``) and ``max_episode_steps``
+    """
+
+    def __init__(self, num_envs: int = 1, **env_kwargs: Any) -> None:
+        self.vec_env = NomaRadioMapVecEnv(num_envs=num_envs, **env_kwargs)
+        super().__init__(num_envs, self.vec_env.single_observation_space, self.vec_env.single_action_space)
+        self._actions: np.ndarray | None = None
+
+    @classmethod
+    def from_id(cls, env_id: str, num_envs: int = 1, **kwargs: Any) -> "MissionVecEnv":
+        """
+        The vector env of a registered mission id with the id's kwargs (e.g. ``NomaRadioMapOMAReality-v0``).
+
+        :param env_id: a registered id of :mod:`noma_radiomap`
+        :param num_envs: number of missions
+        :param kwargs: overrides of the id's kwargs
+        """
+        spec = gym.spec(env_id)
+        if spec.vector_entry_point != "noma_radiomap.vector:make_vec_env":
+            raise ValueError(f"env_id: {env_id!r} is not a mission id of noma_radiomap")
+        return cls(num_envs, **{**spec.kwargs, **kwargs})
+
+    def reset(self) -> VecEnvObs:
+        self.vec_env.reset_missions(np.arange(self.num_envs), list(self._seeds), [opt or None for opt in self._options])
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        self._reset_seeds()
+        self._reset_options()
+        return self.vec_env.observations()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        vec = self.vec_env
+        result = vec.step_missions(self._actions, slice(None))
+        obs = vec.observations()
+        dones = result.terminated | result.truncated
+        infos = [result.info(k) for k in range(self.num_envs)]
+        for k in range(self.num_envs):
+            infos[k]["TimeLimit.truncated"] = bool(result.truncated[k] and not result.terminated[k])
+        ended = np.flatnonzero(dones)
+        if len(ended):
+            summaries = vec.episode_summaries(ended)
+            for j, k in enumerate(ended):
+                infos[k].update(
+                    is_success=bool(summaries["is_success"][j]),
+                    mqi=float(summaries["mqi"][j]),
+                    mission_time=summaries["mission_time"][j],
+                    outage_steps=summaries["outage_steps"][j],
+                    terminal_observation=obs[k],
+                )
+            vec.reset_missions(ended)
+            obs = obs.copy()
+            obs[ended] = vec.observations(ended)
+        return obs, result.reward.astype(np.float32), dones, infos
+
+    def close(self) -> None:
+        self.vec_env.close()
+
+    def _views(self, indices: VecEnvIndices) -> list[Any]:
+        return [self.vec_env.mission(i) for i in self._get_indices(indices)]
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(view, attr_name) for view in self._views(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        if attr_name != "reward_phase":
+            raise AttributeError(f"set_attr: only 'reward_phase' can be set on the mission vector env, got {attr_name!r}")
+        self.vec_env.set_reward_phase(value, indices=list(self._get_indices(indices)))
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+    ) -> list[Any]:
+        return [getattr(view, method_name)(*method_args, **method_kwargs) for view in self._views(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        raise NotImplementedError("the mission vector env does not render; render a single env (gymnasium.make)")
+
+
+def make_mission_vec_env(
+    env_id: str = "NomaRadioMap-v0",
+    n_envs: int = 1,
+    seed: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    monitor: bool = True,
+) -> VecEnv:
+    """
+    SB3's ``make_vec_env`` for the mission ids, batched: a :class:`MissionVecEnv` of ``n_envs`` missions,
+    seeded ``seed + i``, in a ``VecMonitor`` (episode returns, lengths and ``is_success`` for SB3's logger).
+
+    :param env_id: a registered mission id
+    :param n_envs: number of missions
+    :param seed: seed of mission 0 (mission i gets ``seed + i``); None: random
+    :param env_kwargs: overrides of the id's kwargs (``scenario``, ``reward_phase``, ...)
+    :param monitor: wrap in ``VecMonitor``
+    :return: the vector env
+    """
+    env: VecEnv = MissionVecEnv.from_id(env_id, n_envs, **(env_kwargs or {}))
+    if seed is not None:
+        env.seed(seed)
+    if monitor:
+        env = VecMonitor(env, info_keywords=("is_success",))
+    return env

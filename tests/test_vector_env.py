@@ -1,0 +1,244 @@
+"""The batched mission env (NomaRadioMapVecEnv, MissionVecEnv): same transitions as N single envs, the SB3 and
+Gymnasium vector-env contracts, and DT-DPG / the baselines training from it."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3.common.noise import VectorizedActionNoise
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+import noma_radiomap  # noqa: F401
+from noma_radiomap.vector import NomaRadioMapVecEnv
+from sb3_dtdpg import DTDPG, Phase
+from sb3_dtdpg.baselines import make_model
+from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
+from sb3_dtdpg.common.noise import LinearDecayOUNoise
+from sb3_dtdpg.vec_env import MissionVecEnv, make_mission_vec_env
+
+
+def assert_same(a, b, path="info"):
+    """Equal values, keys and (for scalars) types, recursively."""
+    if isinstance(a, dict):
+        assert set(a) == set(b), (path, set(a) ^ set(b))
+        for key in a:
+            assert_same(a[key], b[key], f"{path}[{key!r}]")
+    elif isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        assert np.asarray(a).dtype == np.asarray(b).dtype, path
+        np.testing.assert_array_equal(a, b, err_msg=path)
+    else:
+        assert type(a) is type(b) and a == b, (path, a, b)
+
+
+def homing_actions(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Head for the destinations with noise (episodes that end by arrival and by truncation), random powers."""
+    per_robot = obs.reshape(len(obs), -1, 6)
+    actions = np.empty((len(obs), per_robot.shape[1], 3), dtype=np.float32)
+    actions[..., :2] = 3.0 * (per_robot[..., 2:4] - per_robot[..., 0:2]) + rng.normal(0.0, 0.7, per_robot[..., :2].shape)
+    actions[..., 2] = rng.uniform(-1.0, 1.0, per_robot.shape[:2])
+    return np.clip(actions, -1.0, 1.0).reshape(len(obs), -1)
+
+
+CASES = [
+    ("NomaRadioMap-v0", {}),
+    ("NomaRadioMapOMAReality-v0", {}),
+    ("NomaRadioMapReality-v0", {"inducing": "geodesic", "reward_phase": "combined"}),
+]
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), CASES)
+def test_sb3_face_gives_the_transitions_of_a_dummy_vec_env(env_id, kwargs):
+    n, seed = 3, 11
+    kwargs = {"scenario": "small", **kwargs}
+    batched = MissionVecEnv.from_id(env_id, n, **kwargs)
+    single = DummyVecEnv([lambda: gym.make(env_id, **kwargs)] * n)
+    batched.seed(seed)
+    single.seed(seed)
+    obs = batched.reset()
+    np.testing.assert_array_equal(obs, single.reset())
+    rng = np.random.default_rng(0)
+    ends = {"terminated": 0, "truncated": 0}
+    for t in range(400):
+        if t == 150:  # a phase switch on one mission only
+            for env in (batched, single):
+                env.env_method("set_reward_phase", "mqi", indices=[1])
+        actions = homing_actions(obs, rng)
+        obs, rewards, dones, infos = batched.step(actions)
+        single_obs, single_rewards, single_dones, single_infos = single.step(actions)
+        np.testing.assert_array_equal(obs, single_obs)
+        assert rewards.dtype == single_rewards.dtype
+        np.testing.assert_array_equal(rewards, single_rewards)
+        np.testing.assert_array_equal(dones, single_dones)
+        for info, single_info in zip(infos, single_infos, strict=True):
+            assert_same(info, single_info)
+            if "terminal_observation" in info:
+                ends["truncated" if info["TimeLimit.truncated"] else "terminated"] += 1
+    assert ends["terminated"] >= 3 and ends["truncated"] >= 3, ends
+    assert batched.get_attr("reward_phase") == single.get_attr("reward_phase")
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), CASES[1:])
+def test_make_vec_gives_the_transitions_of_a_sync_vector_env(env_id, kwargs):
+    n, seed = 3, 5
+    kwargs = {"scenario": "small", **kwargs}
+    batched = gym.make_vec(env_id, num_envs=n, **kwargs)
+    single = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", **kwargs)
+    assert isinstance(batched.unwrapped, NomaRadioMapVecEnv)
+    assert batched.metadata["autoreset_mode"] == single.metadata["autoreset_mode"]
+    obs, _ = batched.reset(seed=seed)
+    np.testing.assert_array_equal(obs, single.reset(seed=seed)[0])
+    rng = np.random.default_rng(1)
+    n_ends = 0
+    for _ in range(250):
+        actions = homing_actions(obs, rng)
+        obs, rewards, terminated, truncated, infos = batched.step(actions)
+        single_obs, single_rewards, single_terminated, single_truncated, single_infos = single.step(actions)
+        for a, b in (
+            (obs, single_obs),
+            (rewards, single_rewards),
+            (terminated, single_terminated),
+            (truncated, single_truncated),
+        ):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+        assert_same(infos, single_infos)
+        n_ends += int(np.sum(terminated | truncated))
+    assert n_ends >= 6
+    assert batched.call("reward_weights", "mqi") == single.call("reward_weights", "mqi")
+    assert batched.get_attr("reward_phase") == single.get_attr("reward_phase")
+
+
+def test_move_batch_gives_the_bits_of_move():
+    env = gym.make("NomaRadioMap-v0").unwrapped
+    motion, rng = env._motion, np.random.default_rng(3)
+    free = np.argwhere(~env.radio_map.blocked)
+    positions = (
+        free[rng.integers(len(free), size=(64, 2))] + rng.uniform(0.0, 1.0, (64, 2, 2))
+    ) * env.scenario.room.resolution
+    destinations = (free[rng.integers(len(free), size=(64, 2))] + 0.5) * env.scenario.room.resolution
+    active = np.ones((64, 2), dtype=bool)
+    for _ in range(60):
+        actions = rng.uniform(-1.5, 1.5, (64, 2, 2))
+        actions[rng.random((64, 2)) < 0.1] = 0.0
+        new, arrived = motion.move_batch(positions, actions, destinations, active)
+        for i in range(len(positions)):
+            one, one_arrived = motion.move(positions[i], actions[i], destinations[i], active[i])
+            np.testing.assert_array_equal(new[i], one)
+            np.testing.assert_array_equal(arrived[i], one_arrived)
+        positions, active = new, active & ~arrived
+
+
+def test_env_method_reward_phases_and_components():
+    env = MissionVecEnv(4, scenario="small")
+    env.seed(0)
+    env.reset()
+    env.env_method("set_reward_phase", "mqi", indices=[0, 2])
+    assert env.get_attr("reward_phase") == ["mqi", "destination", "mqi", "destination"]
+    assert env.env_method("reward_weights") == [env.get_attr("reward_weights")[i]() for i in range(4)]
+    _, rewards, _, infos = env.step(np.zeros((4, 6), dtype=np.float32))
+    for i, info in enumerate(infos):
+        weights = env.env_method("reward_weights", indices=[i])[0]
+        assert rewards[i] == np.float32(sum(weights[k] * v for k, v in info["reward_components"].items()))
+    assert env.env_method("reward_weights", "destination")[0]["qos"] == 0.0
+    assert env.get_attr("scenario", indices=[3])[0].name == "small"
+    assert env.get_attr("step_count") == [1, 1, 1, 1]
+    with pytest.raises(ValueError, match="reward_phase"):
+        env.env_method("set_reward_phase", "fast")
+
+
+def test_make_mission_vec_env_monitors_episodes():
+    env = make_mission_vec_env("NomaRadioMap-v0", n_envs=2, seed=0, env_kwargs={"scenario": "small", "max_episode_steps": 5})
+    env.reset()
+    for _ in range(5):
+        _, _, dones, infos = env.step(np.zeros((2, 6), dtype=np.float32))
+    assert dones.all()
+    for info in infos:
+        assert set(info["episode"]) == {"r", "l", "t", "is_success"} and info["episode"]["l"] == 5
+        assert info["TimeLimit.truncated"] and "mqi" in info and info["terminal_observation"].shape == (12,)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"num_envs": 0}, "num_envs"),
+        ({"render_mode": "human"}, "render_mode"),
+        ({"max_episode_steps": 0}, "max_episode_steps"),
+    ],
+)
+def test_bad_arguments_name_the_field(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        NomaRadioMapVecEnv(**{"scenario": "small", **kwargs})
+
+
+@pytest.mark.parametrize("n_envs", [2, 4])
+def test_dtdpg_curriculum_on_the_vector_env(tmp_path, n_envs):
+    env = make_mission_vec_env(n_envs=n_envs, seed=0, env_kwargs={"scenario": "small", "max_episode_steps": 10})
+    phases = [
+        Phase("destination", n_episodes=5, sigma=0.5, final_sigma=0.1, decay_episodes=6),
+        Phase("mqi", sigma=0.3, final_sigma=0.05, decay_episodes=10, replay_handling="relabel"),
+    ]
+    model = DTDPG(
+        "MlpPolicy",
+        env,
+        phases=phases,
+        learning_starts=20,
+        batch_size=16,
+        train_freq=1,
+        gradient_steps=n_envs,
+        policy_kwargs={"net_arch": [16]},
+        curriculum_save_path=str(tmp_path),
+        seed=0,
+    )
+    model.learn(120)
+    # Episodes are counted over all missions: phase 1 ends after 5 of them (<= 30 steps of each mission)
+    assert model.curriculum_state["phase_index"] == 1
+    assert (tmp_path / "phase_0_destination.zip").exists()
+    assert env.get_attr("reward_phase") == ["mqi"] * n_envs
+    assert isinstance(model.replay_buffer, RewardComponentsReplayBuffer) and model.replay_buffer.n_envs == n_envs
+    # Relabelled: every stored reward is the mqi reward of its components
+    buffer, weights = model.replay_buffer, env.env_method("reward_weights", "mqi", indices=[0])[0]
+    size = buffer.pos
+    stored = buffer.rewards[:size]
+    relabelled = sum(weights[k] * buffer.reward_components[:size, :, j] for j, k in enumerate(buffer.component_keys))
+    np.testing.assert_allclose(stored, relabelled, rtol=1e-6)
+    # One noise schedule for all missions
+    noise = model.action_noise
+    assert isinstance(noise, VectorizedActionNoise) and len(noise.noises) == n_envs
+    assert all(isinstance(k, LinearDecayOUNoise) for k in noise.noises)
+    assert len({id(k._schedule) for k in noise.noises}) == 1
+    # The model saves and resumes on the vector env
+    model.save(tmp_path / "model.zip")
+    loaded = DTDPG.load(tmp_path / "model.zip", env=env)
+    assert loaded.curriculum_state["phase_index"] == 1
+    loaded.learn(2 * n_envs, reset_num_timesteps=False)
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
+def test_baselines_train_from_the_vector_env(algo):
+    env = make_mission_vec_env(n_envs=3, seed=0, env_kwargs={"scenario": "small", "reward_phase": "combined"})
+    model = make_model(
+        algo, env, seed=0, learning_starts=10, batch_size=16, train_freq=1, gradient_steps=3, policy_kwargs={"net_arch": [16]}
+    )
+    model.learn(30)
+    assert model.num_timesteps == 30 and model.replay_buffer.pos == 10
+
+
+def test_study_workers_share_the_runs(tmp_path):
+    """Two workers on one JournalFile study run every run once, and a finished run is not run again."""
+    from sb3_dtdpg.experiments.distributed import run_study_worker, study_specs
+    from sb3_dtdpg.experiments.runs import result_path
+
+    specs = study_specs("compare", "tiny", seeds=2)
+    ran = []
+
+    def fake_run(spec, out):
+        ran.append(spec.run_id)
+        path = result_path(out, spec)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("{}")
+
+    storage = str(tmp_path / "study.log")
+    first = run_study_worker(specs, tmp_path, storage, "job", n_runs=2, run=fake_run)
+    second = run_study_worker(specs, tmp_path, storage, "job", run=fake_run)
+    assert len(first) == 2 and sorted(first + second) == sorted(spec.run_id for spec in specs)
+    assert sorted(ran) == sorted(spec.run_id for spec in specs)
+    assert run_study_worker(specs, tmp_path, storage, "job", run=fake_run) == []
