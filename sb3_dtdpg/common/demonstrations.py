@@ -7,7 +7,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 
 class Demonstrator(Protocol):
-    """What :class:`DemonstrationCallback` needs of a demonstrator: the planners of ``noma_radiomap`` have it."""
+    """What :class:`DemonstrationCallback` needs of a demonstrator (a planner, for instance)."""
 
     def reset(self, env: Any) -> None:
         """Plan for the episode that ``env`` (the unwrapped env, just reset) starts."""
@@ -29,8 +29,8 @@ class DemonstrationCallback(BaseCallback):
     not count as timesteps or curriculum episodes. Afterwards the training env is reset. Seeding happens once, in
     the first ``learn()`` of a model (``num_timesteps == 0``).
 
-    :param demonstrator: an object with ``reset(env)`` and ``act(env, observation)`` (e.g.
-        ``noma_radiomap.planners.CommAwarePlanner()``), called with the unwrapped env
+    :param demonstrator: an object with ``reset(env)`` and ``act(env, observation)`` (e.g. one of the mission
+        env's planners, docs/ARCHITECTURE.md), called with the unwrapped env
     :param n_episodes: number of demonstration episodes
     :param verbose: verbosity level
     """
