@@ -147,6 +147,7 @@ def training_digest() -> str:
         gamma=0.99,
         train_freq=1,
         gradient_steps=1,
+        n_steps=1,
         policy_kwargs={"net_arch": [128, 64]},
         phases=phases,
         seed=0,
