@@ -186,7 +186,7 @@ def test_dict_consistency_with_flattened_observations():
     dict_env = gym.wrappers.TimeLimit(DictEnv(vec_only=True), 100)
     flat_env = gym.wrappers.FlattenObservation(dict_env)
     obs, _ = dict_env.reset(seed=0)
-    kwargs: dict[str, Any] = dict(buffer_size=100, train_freq=8, learning_starts=50, gamma=0.5, seed=1)
+    kwargs: dict[str, Any] = dict(buffer_size=100, train_freq=8, learning_starts=50, gamma=0.5, n_steps=1, seed=1)
     dict_model = DTDPG("MultiInputPolicy", dict_env, policy_kwargs=dict(net_arch=[8, 8]), **kwargs)
     before = dict_model.predict(obs, deterministic=True)[0]
     dict_model.learn(128)

@@ -4,6 +4,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
 import torch as th
+from gymnasium import spaces
 from stable_baselines3 import DDPG
 from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, EvalCallback
@@ -75,6 +76,7 @@ class DTDPG(DDPG):
         at a cost of more complexity.
         See https://github.com/DLR-RM/stable-baselines3/issues/37#issuecomment-637501195
     :param n_steps: When n_step > 1, uses n-step return (with the NStepReplayBuffer) when updating the Q-value network.
+        None (default): 3, or 1 on Dict observation spaces, where SB3 has no n-step returns
     :param tensorboard_log: the log location for tensorboard (if None, no logging)
     :param policy_kwargs: additional arguments to be passed to the policy on creation
         (``net_arch``, ``activation_fn``, ``batch_norm_momentum``, ``batch_norm_eps``, ...)
@@ -117,7 +119,7 @@ class DTDPG(DDPG):
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         optimize_memory_usage: bool = False,
-        n_steps: int = 3,
+        n_steps: int | None = None,
         tensorboard_log: str | None = None,
         policy_kwargs: dict[str, Any] | None = None,
         verbose: int = 0,
@@ -143,7 +145,7 @@ class DTDPG(DDPG):
             replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs,
             optimize_memory_usage=optimize_memory_usage,
-            n_steps=n_steps,
+            n_steps=3 if n_steps is None else n_steps,
             tensorboard_log=tensorboard_log,
             policy_kwargs=policy_kwargs,
             verbose=verbose,
@@ -151,6 +153,8 @@ class DTDPG(DDPG):
             device=device,
             _init_setup_model=False,
         )
+        if n_steps is None and isinstance(getattr(self, "observation_space", None), spaces.Dict):
+            self.n_steps = 1  # SB3's n-step buffer does not take Dict observations
         self.curriculum_save_path = curriculum_save_path
         self.reinitialize_at_transfer = reinitialize_at_transfer
         # Set by CurriculumTransferCallback at the first learn(), then saved with the model
