@@ -234,6 +234,16 @@ def summary_rows(out: str, names: list[str], seeds: list[int]) -> list[str]:
     return rows
 
 
+def _write_json(path: str, record: dict[str, Any]) -> None:
+    from sb3_dtdpg.common.files import atomic_write
+
+    def write(tmp: str) -> None:
+        with open(tmp, "w") as f:
+            json.dump(record, f)
+
+    atomic_write(path, write)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--configs", nargs="+", default=["base"], help="configurations to run (see --list)")
@@ -267,10 +277,7 @@ def main() -> None:
             for future in done:
                 name, seed = jobs.pop(future)
                 record = future.result()
-                path = os.path.join(args.out, f"{name}_seed{seed}.json")
-                with open(path + ".tmp", "w") as f:
-                    json.dump(record, f)
-                os.replace(path + ".tmp", path)
+                _write_json(os.path.join(args.out, f"{name}_seed{seed}.json"), record)
                 evals = " ".join(f"{e['success']:.2f}" for e in record["evals"])
                 print(
                     f"{time.strftime('%H:%M:%S')} {name} seed {seed}: train95 {record['train95']} eval95 {record['eval95']} "
