@@ -71,7 +71,18 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "sac": {"algo": "sac"},
     "td3": {"algo": "td3", "noise": "normal", "noise_sigma": 0.1},
     "ddpg": {"algo": "ddpg", "noise": "normal", "noise_sigma": 0.1},
+    # fewer gradient steps per env step (one update every 2 or 4 env steps): what trades learning for speed
+    "tf2": {"kwargs": {"train_freq": 2}},
+    "tf4": {"kwargs": {"train_freq": 4}},
 }
+#: The same ablations with the goal-conditioned observation: ``goal_<name>``.
+CONFIGS.update(
+    {
+        f"goal_{name}": {**config, "wrapper": "relative_goal"}
+        for name, config in list(CONFIGS.items())
+        if not name.startswith("relgoal") and "demos" not in config
+    }
+)
 
 
 def build_model(config: dict[str, Any], seed: int, base: dict[str, Any], episodes: int, env: Any) -> Any:

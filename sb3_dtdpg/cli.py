@@ -34,6 +34,11 @@ _HYPERPARAMS_HELP = (
     "paper: Table I (the default of td3, sac and tqc, which have no tuned set)"
 )
 _MODES = ("noma", "oma")
+_OBSERVATIONS = ("paper", "goal")
+_OBSERVATION_HELP = (
+    "goal: the paper's state plus each robot's direction and distance to its destination (an extension, "
+    "docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget); paper: the paper's state only"
+)
 
 
 @contextlib.contextmanager
@@ -80,11 +85,19 @@ def _train_env(args: argparse.Namespace) -> tuple[Any, bool]:
     from sb3_dtdpg.baselines import is_mission_env, make_env
 
     mission = is_mission_env(args.env)
-    options = {"--scenario": args.scenario, "--multiple-access": args.multiple_access, "--channel": args.channel}
+    options = {
+        "--scenario": args.scenario,
+        "--multiple-access": args.multiple_access,
+        "--channel": args.channel,
+        "--observation": args.observation,
+    }
     given = [name for name, value in options.items() if value is not None]
     if not mission and given:
         args.error(f"{', '.join(given)}: {args.env} is not a NomaRadioMap env; these options apply to the mission envs only")
     env_kwargs = {} if args.scenario is None else {"scenario": args.scenario}
+    if mission:
+        args.observation = args.observation or "goal"
+        env_kwargs["observation"] = args.observation
     with _user_errors(args):
         env = make_env(args.algo, args.env, args.multiple_access, args.channel, env_kwargs)
     return env, mission
@@ -136,6 +149,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
         eval_before_transfer=False,
         hyperparams=args.hyperparams,
         timesteps=args.timesteps,
+        observation=args.observation,
     )
     out = Path(args.out)
     run_dir = out / "runs" / spec.run_id
@@ -227,7 +241,9 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         if args.scenario is not None:
             budget = _replace(budget, scenario=args.scenario)
         n_seeds = budget.seeds if args.n_seeds is None else args.n_seeds
-        for spec in compare_specs(budget, n_seeds, args.algos, args.multiple_access, args.env, args.hyperparams):
+        for spec in compare_specs(
+            budget, n_seeds, args.algos, args.multiple_access, args.env, args.hyperparams, args.observation
+        ):
             check_budget(spec)
     run_compare(
         args.out,
@@ -240,6 +256,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         env_id=args.env,
         hyperparams=args.hyperparams,
+        observation=args.observation,
     )
     return 0
 
@@ -256,7 +273,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         check_hyperparams("dtdpg", args.hyperparams)
         if not args.report_only:
             n_seeds = budget.seeds if args.n_seeds is None else args.n_seeds
-            for specs in reproduce_specs(budget, n_seeds, args.hyperparams).values():
+            for specs in reproduce_specs(budget, n_seeds, args.hyperparams, args.observation).values():
                 for spec in specs:
                     check_budget(spec)
     run_reproduce(
@@ -267,6 +284,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         train=not args.report_only,
         hyperparams=args.hyperparams,
+        observation=args.observation,
     )
     if args.budget != "paper":
         paper = BUDGETS["paper"]
@@ -360,6 +378,7 @@ def _add_seeds(p: argparse.ArgumentParser) -> None:
 
 def _add_common_run_options(p: argparse.ArgumentParser, hyperparams: tuple[str, ...]) -> None:
     p.add_argument("--hyperparams", choices=hyperparams, default=None, help=_HYPERPARAMS_HELP)
+    p.add_argument("--observation", choices=_OBSERVATIONS, default="goal", help=_OBSERVATION_HELP + " (default: goal)")
     p.add_argument("--workers", type=_positive, default=None, help="parallel processes (default: number of CPUs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -411,6 +430,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--learning-rate", type=float, default=None, help="override the algorithm's learning rate")
     p.add_argument("--hyperparams", choices=HYPERPARAMS, default=None, help=_HYPERPARAMS_HELP)
+    p.add_argument(
+        "--observation",
+        choices=_OBSERVATIONS,
+        default=None,
+        help=_OBSERVATION_HELP + " (default: goal on the NomaRadioMap envs)",
+    )
     p.add_argument("--tb", default="runs", help="TensorBoard log folder (default: runs)")
     p.add_argument(
         "--out",

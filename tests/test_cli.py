@@ -5,12 +5,14 @@ import json
 
 import pandas as pd
 import pytest
+from stable_baselines3 import DDPG
 from tbparse import SummaryReader
 
 from sb3_dtdpg.cli import main
-from sb3_dtdpg.experiments.compare import compare_specs
+from sb3_dtdpg.experiments import runs
+from sb3_dtdpg.experiments.compare import compare_specs, run_compare
 from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
-from sb3_dtdpg.experiments.runs import BUDGETS, result_path, run_identity
+from sb3_dtdpg.experiments.runs import BUDGETS, RunSpec, result_path, run_identity
 
 # tbparse 0.0.9 sorts with pandas' deprecated `inplace=True`.
 pytestmark = pytest.mark.filterwarnings("ignore:The inplace keyword:DeprecationWarning", "ignore::FutureWarning")
@@ -45,11 +47,13 @@ def test_compare_writes_table_csv_figures_and_event_files(tmp_path, capsys):
     assert markdown.count("\n| ") == len(summary) + 1  # header + one line per row
 
     runs = pd.read_csv(tmp_path / "results_runs.csv")
-    specs = compare_specs(MICRO, 2)
+    specs = compare_specs(MICRO, 2, observation="goal")  # the command's default observation
     assert len(runs) == len(specs) == 8
     for spec in specs:
         result = json.loads(result_path(tmp_path, spec).read_text())
         assert result["train"]["episodes"] == MICRO.episodes
+        assert result["spec"]["observation"] == "goal"
+        assert not (tmp_path / "runs" / spec.run_id / "progress.json").exists()  # removed with the result
         # DT-DPG's 2-episode first phase ends within the 3 episodes: it is evaluated on its last phase's reward
         trained, evaluated = (["destination", "mqi"], "mqi") if spec.algo == "dtdpg" else (["combined"], "combined")
         assert result["reward_phases"] == {"trained": trained, "evaluated": evaluated}
@@ -139,10 +143,12 @@ def test_map_and_train_commands(tmp_path):
     ]
     args.append("--no-progress")
     assert main([*args, "--tb", str(tmp_path / "tb"), "--out", str(tmp_path / "models")]) == 0
-    assert (tmp_path / "models" / "runs" / "ddpg_noma_s0" / "model.zip").exists()
-    result = json.loads((tmp_path / "models" / "runs" / "ddpg_noma_s0" / "result.json").read_text())
+    run_dir = tmp_path / "models" / "runs" / "ddpg_noma_s0_goal"  # the goal-conditioned observation by default
+    model = DDPG.load(run_dir / "model.zip")
+    assert model.observation_space.shape == (9 * 2,)  # the paper's 6 values per robot, plus direction and distance
+    result = json.loads((run_dir / "result.json").read_text())
     assert result["train"]["episodes"] == 2 and len(result["eval"]["episodes"]) == 1
-    events = list((tmp_path / "tb" / "ddpg_noma_s0").rglob("events.out.tfevents*"))
+    events = list((tmp_path / "tb" / "ddpg_noma_s0_goal").rglob("events.out.tfevents*"))
     assert events and "mission/mqi" in set(SummaryReader(str(events[0].parent)).scalars["tag"])
 
 
@@ -160,3 +166,38 @@ def test_bad_arguments_are_rejected(argv, message, capsys):
         main(argv)
     assert error.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_the_observation_is_part_of_a_run():
+    paper, goal = RunSpec("dtdpg", "noma", 0, 3), RunSpec("dtdpg", "noma", 0, 3, observation="goal")
+    assert goal.run_id == "dtdpg_noma_s0_goal" and paper.run_id == "dtdpg_noma_s0"  # one folder can hold both
+    assert goal.env_kwargs == {"observation": "goal"} and "observation" not in paper.env_kwargs
+    assert run_identity(goal)["spec"]["observation"] == "goal" != run_identity(paper)["spec"]["observation"]
+    with pytest.raises(ValueError, match="observation must be one of"):
+        run_compare("unused", budget="_micro", observation="relative")
+
+
+def test_a_run_reports_its_progress_while_it_trains(tmp_path, monkeypatch):
+    records = []
+    write = runs.RunProgress._write
+
+    def recording_write(self):
+        write(self)
+        records.append(json.loads(self.path.read_text()))
+        assert runs.read_progress(tmp_path, spec) == records[-1]
+
+    monkeypatch.setattr(runs.RunProgress, "_write", recording_write)
+    monkeypatch.setattr(runs.RunProgress, "__init__", _every_step(runs.RunProgress.__init__))
+    spec = RunSpec("ddpg", "noma", 0, MICRO.episodes, scenario="small", eval_episodes=1, hyperparams="paper")
+    runs.run_one(spec, tmp_path)
+    assert records[-1] == {"done": 3, "total": 3, "unit": "episodes", "episodes": 3}
+    assert [r["done"] for r in records] == sorted(r["done"] for r in records) and records[0]["done"] == 0
+    assert runs.read_progress(tmp_path, spec) is None  # removed once the result is written
+
+
+def _every_step(init):
+    def wrapped(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        self.interval = 0.0
+
+    return wrapped

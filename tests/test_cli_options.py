@@ -116,8 +116,8 @@ def test_train_on_a_mission_env_evaluates_on_its_last_reward_phase(tmp_path, cap
     args = ["train", "--algo", "ddpg", "--hyperparams", "paper", "--env", "NomaRadioMapOMA-v0", "--scenario", "small"]
     args += ["--episodes", "2", "--eval-episodes", "1", "--no-progress", "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]
     assert main(args) == 0
-    # the env id's own mode (OMA) when --multiple-access is not given
-    assert (tmp_path / "runs" / "ddpg_oma_s0" / "model.zip").exists()
+    # the env id's own mode (OMA) when --multiple-access is not given, the goal-conditioned observation by default
+    assert (tmp_path / "runs" / "ddpg_oma_s0_goal" / "model.zip").exists()
     assert "last reward phase 'combined'; test (1 Rayleigh episodes, 'combined' reward)" in capsys.readouterr().out
 
 

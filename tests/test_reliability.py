@@ -209,6 +209,8 @@ TRAIN = [
     "train",
     "--hyperparams",
     "paper",
+    "--observation",
+    "paper",
     "--scenario",
     "small",
     "--episodes",

@@ -15,7 +15,7 @@ from typing import Any
 
 import pandas as pd
 
-from sb3_dtdpg.experiments.runs import Budget, RunSpec, check_budget, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
 __all__ = ["compare_specs", "evaluate_planners", "run_compare"]
 
@@ -33,6 +33,7 @@ def compare_specs(
     modes: Sequence[str] = ("noma", "oma"),
     env_id: str = "NomaRadioMap-v0",
     hyperparams: str = "paper",
+    observation: str = "paper",
 ) -> list[RunSpec]:
     """:return: the runs of a comparison (every algorithm x mode x seed, trained on the radio map)"""
     return [
@@ -46,6 +47,7 @@ def compare_specs(
             eval_episodes=budget.eval_episodes,
             eval_before_transfer=False,
             hyperparams=hyperparams,
+            observation=observation,
         )
         for algo in algos
         for mode in modes
@@ -101,6 +103,7 @@ def run_compare(
     env_id: str = "NomaRadioMap-v0",
     scenario: str | None = None,
     hyperparams: str = "paper",
+    observation: str = "paper",
 ) -> pd.DataFrame:
     """
     Train and evaluate every algorithm x mode x seed (finished runs are kept), then write the tables and figures.
@@ -115,12 +118,15 @@ def run_compare(
     :param env_id: the env id
     :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
+    :param observation: ``"paper"`` (the paper's state) or ``"goal"`` (the goal-conditioned extension,
+        :class:`noma_radiomap.wrappers.RelativeGoalObservation`)
     :return: the summary table (learners and planners)
     :raises ValueError: on a bad argument, or a budget that cannot train an algorithm (before any run starts)
     :raises OutputBusyError: another job is using ``out``
     :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
         scenario or hyperparameters): use another folder
     """
+    from noma_radiomap.registration import OBSERVATIONS
     from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
     from sb3_dtdpg.experiments import plots, tables
 
@@ -135,15 +141,15 @@ def run_compare(
         raise ValueError(f"modes: expected 'noma' and/or 'oma', got {bad_modes}")
     for algo in algos:
         check_hyperparams(algo, hyperparams)  # before any run
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
     seeds = budget.seeds if seeds is None else seeds
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
-        specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams)
-        for spec in specs:
-            check_budget(spec)  # before any run
+        specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams, observation)
         report = run_many(specs, out, n_workers=n_workers, progress=progress)
         for run_id, error in report.failed.items():
             print(f"run {run_id} failed: {error}")
@@ -156,7 +162,8 @@ def run_compare(
         summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
         title = (
             f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes, "
-            f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds, {hyperparams} hyperparameters)"
+            f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds, {hyperparams} hyperparameters, "
+            f"{observation} observation)"
         )
         tables.save_tables(summary, records, out, "results", title)
         tables.print_table(summary, title)

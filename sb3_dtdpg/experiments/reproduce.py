@@ -27,7 +27,7 @@ from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import tables
 from sb3_dtdpg.experiments.compare import evaluate_planners
-from sb3_dtdpg.experiments.runs import Budget, RunSpec, check_budget, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
 __all__ = ["LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
 
@@ -59,6 +59,7 @@ def _spec(
     episodes: int,
     lr: float | None = None,
     hyperparams: str = "paper",
+    observation: str = "paper",
 ) -> RunSpec:
     tag = f"{'radio_map' if channel == 'radio_map' else 'reality'}_{episodes}" + (f"_lr{lr:g}" if lr is not None else "")
     return RunSpec(
@@ -72,24 +73,29 @@ def _spec(
         eval_episodes=budget.eval_episodes,
         tag=tag,
         hyperparams=hyperparams,
+        observation=observation,
     )
 
 
-def reproduce_specs(budget: Budget, seeds: int, hyperparams: str = "paper") -> dict[str, list[RunSpec]]:
+def reproduce_specs(
+    budget: Budget, seeds: int, hyperparams: str = "paper", observation: str = "paper"
+) -> dict[str, list[RunSpec]]:
     """:return: the runs of every experiment, by experiment (a run may serve several experiments)"""
     e, long = budget.episodes, budget.long_episodes
     modes = ("noma", "oma")
-    h = hyperparams
+    h, o = hyperparams, observation
     table = [
-        _spec(budget, "dtdpg", m, s, c, n, hyperparams=h)
+        _spec(budget, "dtdpg", m, s, c, n, hyperparams=h, observation=o)
         for m in modes
         for c, n in (("radio_map", e), ("rayleigh", e), ("rayleigh", long))
         for s in range(seeds)
     ]
-    ddpg = [_spec(budget, "ddpg", m, s, "radio_map", e, hyperparams=h) for m in modes for s in range(seeds)]
-    dtdpg = [_spec(budget, "dtdpg", m, s, "radio_map", e, hyperparams=h) for m in modes for s in range(seeds)]
+    ddpg = [_spec(budget, "ddpg", m, s, "radio_map", e, hyperparams=h, observation=o) for m in modes for s in range(seeds)]
+    dtdpg = [_spec(budget, "dtdpg", m, s, "radio_map", e, hyperparams=h, observation=o) for m in modes for s in range(seeds)]
     other = other_learning_rate(h)
-    lrs = [_spec(budget, "dtdpg", m, s, "radio_map", e, other, hyperparams=h) for m in modes for s in range(seeds)]
+    lrs = [
+        _spec(budget, "dtdpg", m, s, "radio_map", e, other, hyperparams=h, observation=o) for m in modes for s in range(seeds)
+    ]
     return {"ddpg_vs_dtdpg": dtdpg + ddpg, "table_ii": table, "learning_rates": dtdpg + lrs}
 
 
@@ -148,6 +154,7 @@ def run_reproduce(
     progress: bool = True,
     train: bool = True,
     hyperparams: str = "paper",
+    observation: str = "paper",
 ) -> dict[str, pd.DataFrame]:
     """
     Run (or resume) every experiment and write its tables (Markdown + CSV) and figures under ``out``.
@@ -160,6 +167,7 @@ def run_reproduce(
     :param progress: progress bars and printed tables
     :param train: run the unfinished runs; False only re-draws the tables and figures from the finished ones
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
+    :param observation: ``"paper"`` (the paper's state) or ``"goal"`` (the goal-conditioned extension)
     :return: the tables, by name
     :raises ValueError: on a bad argument, or a budget that cannot train a run (before any run starts)
     :raises OutputBusyError: another job is using ``out``
@@ -167,6 +175,10 @@ def run_reproduce(
         scenario or hyperparameters): use another folder
     """
 
+    from noma_radiomap.registration import OBSERVATIONS
+
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
     budget = get_budget(budget)
     seeds = budget.seeds if seeds is None else seeds
     if seeds < 1:
@@ -175,13 +187,11 @@ def run_reproduce(
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
-        experiments = reproduce_specs(budget, seeds, hyperparams)
+        experiments = reproduce_specs(budget, seeds, hyperparams, observation)
         unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
         # Seed by seed, so that an interrupted job has whole seeds of every experiment.
         unique.sort(key=lambda spec: spec.seed)
         if train:
-            for spec in unique:
-                check_budget(spec)  # before any run
             report = run_many(unique, out, n_workers=n_workers, progress=progress)
             for run_id, error in report.failed.items():
                 print(f"run {run_id} failed: {error}")
@@ -206,7 +216,7 @@ def run_reproduce(
                 rec,
                 out,
                 "table_ii",
-                f"Table II: DT-DPG test MQI ({budget.name} budget, {hyperparams} hyperparameters)",
+                f"Table II: DT-DPG test MQI ({budget.name} budget, {hyperparams} hyperparameters, {observation} observation)",
                 columns=("multiple_access", "approach", "episodes"),
             )
             out_tables["table_ii"] = summary
@@ -218,7 +228,10 @@ def run_reproduce(
             summary = tables.summarise(rec)
             planner_rows, _ = evaluate_planners(("noma", "oma"), budget)
             summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
-            title = f"DDPG vs DT-DPG ({budget.name} budget, {hyperparams} hyperparameters, radio-map training)"
+            title = (
+                f"DDPG vs DT-DPG ({budget.name} budget, {hyperparams} hyperparameters, {observation} observation, "
+                "radio-map training)"
+            )
             tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", title)
             out_tables["ddpg_vs_dtdpg"] = summary
             if progress:
@@ -233,7 +246,8 @@ def run_reproduce(
                 rec,
                 out,
                 "learning_rates",
-                f"DT-DPG with two learning rates ({budget.name} budget, {hyperparams} hyperparameters)",
+                f"DT-DPG with two learning rates ({budget.name} budget, {hyperparams} hyperparameters, "
+                f"{observation} observation)",
                 columns=("multiple_access", "learning_rate"),
             )
             out_tables["learning_rates"] = summary

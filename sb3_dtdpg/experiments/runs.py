@@ -27,8 +27,8 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -91,7 +91,7 @@ BUDGETS: dict[str, Budget] = {
     "_micro": Budget("_micro", episodes=3, long_episodes=4, eval_episodes=2, seeds=2, scenario="small"),
     "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small"),
     "reduced": Budget("reduced", episodes=200, long_episodes=280, eval_episodes=20, seeds=3, scenario="small"),
-    "default": Budget("default", episodes=50, long_episodes=70, eval_episodes=20, seeds=3),
+    "default": Budget("default", episodes=250, long_episodes=350, eval_episodes=20, seeds=1),
     "small": Budget("small", episodes=200, long_episodes=280, eval_episodes=20, seeds=3),
     "paper": Budget("paper", episodes=500, long_episodes=700, eval_episodes=20, seeds=5),
 }
@@ -138,6 +138,8 @@ class RunSpec:
         phase (the "before transfer" trajectories of the paper's Fig. 5b)
     :param hyperparams: hyperparameter set of :func:`sb3_dtdpg.baselines.make_model` (``"paper"`` or ``"tuned"``)
     :param timesteps: train for this many timesteps instead of ``episodes`` episodes (None: by episodes)
+    :param observation: the env's observation, ``"paper"`` (the paper's state) or ``"goal"`` (the goal-conditioned
+        extension, :class:`noma_radiomap.wrappers.RelativeGoalObservation`)
     """
 
     algo: str
@@ -157,10 +159,15 @@ class RunSpec:
     eval_before_transfer: bool = True
     hyperparams: str = "paper"
     timesteps: int | None = None
+    observation: str = "paper"
 
     @property
     def _suffix(self) -> str:
-        return (f"_{self.tag}" if self.tag else "") + (f"_{self.hyperparams}" if self.hyperparams != "paper" else "")
+        return (
+            (f"_{self.tag}" if self.tag else "")
+            + (f"_{self.hyperparams}" if self.hyperparams != "paper" else "")
+            + (f"_{self.observation}" if self.observation != "paper" else "")
+        )
 
     @property
     def run_id(self) -> str:
@@ -174,8 +181,12 @@ class RunSpec:
 
     @property
     def env_kwargs(self) -> dict[str, Any]:
-        kwargs = {} if self.scenario is None else {"scenario": self.scenario}
-        return kwargs if self.inducing is None else {**kwargs, "inducing": self.inducing}
+        kwargs: dict[str, Any] = {} if self.scenario is None else {"scenario": self.scenario}
+        if self.inducing is not None:
+            kwargs["inducing"] = self.inducing
+        if self.observation != "paper":
+            kwargs["observation"] = self.observation
+        return kwargs
 
 
 class RunMismatchError(ValueError):
@@ -380,6 +391,49 @@ class EpisodeReturnLogger(BaseCallback):
         return True
 
 
+class RunProgress(BaseCallback):
+    """
+    Write the run's progress (episodes and timesteps done, and the budget) to a small JSON file at most every
+    ``interval`` seconds and at the end, for :func:`run_many` to show a bar per running run.
+
+    :param path: the progress file (``<run dir>/progress.json``)
+    :param total: the budget, in ``unit``
+    :param unit: ``"episodes"`` or ``"timesteps"``
+    :param start: episodes already trained (a resumed run)
+    :param interval: seconds between writes
+    """
+
+    def __init__(self, path: Path, total: int, unit: str = "episodes", start: int = 0, interval: float = 1.0) -> None:
+        super().__init__()
+        self.path, self.total, self.unit, self.interval = path, total, unit, interval
+        self.n_episodes, self._last = start, -math.inf
+
+    def _write(self) -> None:
+        done = self.n_episodes if self.unit == "episodes" else self.num_timesteps
+        data = {"done": done, "total": self.total, "unit": self.unit, "episodes": self.n_episodes}
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text(json.dumps(data))
+        os.replace(tmp, self.path)  # a reader sees the old or the new file, never half of one
+        self._last = time.monotonic()
+
+    def _on_step(self) -> bool:
+        self.n_episodes += sum("episode" in info for info in self.locals["infos"])
+        if time.monotonic() - self._last >= self.interval:
+            self._write()
+        return True
+
+    def _on_training_end(self) -> None:
+        self._write()
+
+
+def read_progress(out: str | Path, spec: RunSpec) -> dict[str, Any] | None:
+    """:return: a running run's last :class:`RunProgress` record, or None when it has not started"""
+    try:
+        return json.loads((Path(out) / "runs" / spec.run_id / "progress.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
 class PeriodicCheckpoint(BaseCallback):
     """
     Save the model and its replay buffer every ``every`` episodes (at the end of the rollout in which the
@@ -554,8 +608,10 @@ def run_one(
         remaining = spec.episodes - done_episodes
         total_timesteps = remaining * max_steps
         callbacks.insert(0, StopTrainingOnMaxEpisodes(remaining))
+        callbacks.append(RunProgress(run_dir / "progress.json", spec.episodes, "episodes", done_episodes))
     else:
         total_timesteps = spec.timesteps - model.num_timesteps
+        callbacks.append(RunProgress(run_dir / "progress.json", spec.timesteps, "timesteps", done_episodes))
     if checkpoint_every:
         callbacks.append(PeriodicCheckpoint(run_dir, checkpoint_every, identity, start=done_episodes))
     start = time.perf_counter()
@@ -615,6 +671,7 @@ def run_one(
     _write_json(result_path(out, spec), result)
     # The result supersedes the checkpoints (the replay buffer can be large).
     (run_dir / "checkpoint.json").unlink(missing_ok=True)
+    (run_dir / "progress.json").unlink(missing_ok=True)
     shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)
     return result
 
@@ -689,9 +746,10 @@ def run_many(
     :param on_finish: called with each run id as it finishes
     :return: the report
     :raises RunMismatchError: a stored result is another run's (checked for every run before any starts)
+    :raises ValueError: a run's budget cannot train (:func:`check_budget`, for every run before any starts)
     """
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
+    for spec in specs:
+        check_budget(spec)  # every run's budget before any run starts
     report = RunReport()
     todo: list[RunSpec] = []
     for spec in specs:
@@ -701,35 +759,87 @@ def run_many(
             todo.append(spec)
     n_workers = max(1, min(n_workers or os.cpu_count() or 1, len(todo) or 1))
     start = time.perf_counter()
-    columns = (
-        TextColumn("[bold]runs"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("{task.description}"),
-    )
-    with Progress(*columns, disable=not progress) as bar:
-        task = bar.add_task("", total=len(todo))
+    with _RunBars(out, len(todo), enabled=progress) as bars:
         if todo:
             executor = worker_pool(n_workers)
             try:
-                pending: dict[Future, RunSpec] = {executor.submit(_worker, spec, str(out)): spec for spec in todo}
+                pending = {executor.submit(_worker, spec, str(out)): spec for spec in todo}
                 while pending:
-                    done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    done, _ = wait(pending, timeout=2.0 if progress else None, return_when=FIRST_COMPLETED)
+                    bars.show_running(pending.values())
                     for future in done:
                         spec = pending.pop(future)
                         try:
-                            run_id, seconds = future.result()
-                            report.finished.append(run_id)
-                            bar.update(task, advance=1, description=f"{run_id} done in {seconds:.0f} s")
+                            _, seconds = future.result()
+                            report.finished.append(spec.run_id)
+                            bars.finished(spec.run_id, f"{spec.run_id} done in {seconds:.0f} s")
                             if on_finish is not None:
-                                on_finish(run_id)
+                                on_finish(spec.run_id)
                         except Exception as error:  # a failed run must not take the others down
                             report.failed[spec.run_id] = f"{type(error).__name__}: {error}"
-                            bar.update(task, advance=1, description=f"{spec.run_id} FAILED")
+                            bars.finished(spec.run_id, f"{spec.run_id} FAILED")
             except KeyboardInterrupt:
                 executor.shutdown(wait=False, cancel_futures=True)
                 raise
             executor.shutdown()
     report.wall_s = time.perf_counter() - start
     return report
+
+
+class _RunBars:
+    """
+    The progress display of :func:`run_many`: one bar for the runs, and one per run in progress (episodes done,
+    elapsed time and ETA, read from the run's :class:`RunProgress` file).
+    """
+
+    def __init__(self, out: str | Path, n_runs: int, enabled: bool = True) -> None:
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self.out, self.enabled = out, enabled
+        self.progress = Progress(
+            TextColumn("{task.fields[name]}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[unit]}"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            TextColumn("{task.description}"),
+            disable=not enabled,
+        )
+        self.runs = self.progress.add_task("", total=n_runs, name="[bold]runs", unit="")
+        self.running: dict[str, Any] = {}
+
+    def __enter__(self) -> _RunBars:
+        self.progress.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.progress.stop()
+
+    def show_running(self, specs: Iterable[RunSpec]) -> None:
+        """Update (or add) the bar of each started run of ``specs``."""
+        if not self.enabled:
+            return
+        for spec in specs:
+            record = read_progress(self.out, spec)
+            if record is None:
+                continue
+            if spec.run_id not in self.running:
+                self.running[spec.run_id] = self.progress.add_task(
+                    "", total=record["total"], name=spec.run_id, unit=record["unit"]
+                )
+            self.progress.update(self.running[spec.run_id], completed=record["done"])
+
+    def finished(self, run_id: str, description: str) -> None:
+        """Remove the run's bar and count it as done."""
+        if run_id in self.running:
+            self.progress.remove_task(self.running.pop(run_id))
+        self.progress.update(self.runs, advance=1, description=description)
