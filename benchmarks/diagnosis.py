@@ -33,7 +33,8 @@ import numpy as np
 
 #: Changes to the base set-up. Keys: ``algo`` (dtdpg, ddpg, td3, sac), ``kwargs`` (algorithm kwargs merged into the
 #: base, ``policy_kwargs`` merged key by key), ``phase`` (fields of the phase-1 :class:`Phase`: the OU schedule),
-#: ``noise`` ("ou" or "normal" with ``noise_sigma``), ``env`` (env kwargs).
+#: ``noise`` ("ou" or "normal" with ``noise_sigma``), ``env`` (env kwargs), ``n_envs`` (train on the batched vector env
+#: of that many missions).
 CONFIGS: dict[str, dict[str, Any]] = {
     "base": {},
     # exploration
@@ -74,6 +75,10 @@ CONFIGS: dict[str, dict[str, Any]] = {
     # fewer gradient steps per env step (one update every 2 or 4 env steps): what trades learning for speed
     "tf2": {"kwargs": {"train_freq": 2}},
     "tf4": {"kwargs": {"train_freq": 4}},
+    # N missions per step (sb3_dtdpg.vec_env.make_mission_vec_env): one update per transition, or fewer
+    "vec4": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": -1}},
+    "vec4_gs1": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
+    "vec8_gs2": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 2}},
 }
 #: The same ablations with the goal-conditioned observation: ``goal_<name>``.
 CONFIGS.update(
@@ -158,12 +163,15 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     th.set_num_threads(1)
     config = CONFIGS[name]
     env_kwargs = {"reward_phase": "destination", **config.get("env", {})}
-    env = gym.make(args.env, **env_kwargs)
-    eval_env = gym.make(args.env, **env_kwargs)
     if config.get("wrapper") == "relative_goal":
-        from noma_radiomap.wrappers import RelativeGoalObservation
+        env_kwargs["observation"] = "goal"  # noma_radiomap.wrappers.RelativeGoalObservation
+    eval_env = gym.make(args.env, **env_kwargs)
+    if config.get("n_envs"):
+        from sb3_dtdpg.vec_env import make_mission_vec_env
 
-        env, eval_env = RelativeGoalObservation(env), RelativeGoalObservation(eval_env)
+        env = make_mission_vec_env(args.env, config["n_envs"], seed=seed, env_kwargs=env_kwargs)
+    else:
+        env = gym.make(args.env, **env_kwargs)
     base = copy.deepcopy(TUNED_KWARGS) if args.base == "tuned" else {}
     model = build_model(config, seed, base, args.episodes, env)
     record: dict[str, Any] = {"config": name, "seed": seed, "train_success": [], "evals": []}

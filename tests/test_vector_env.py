@@ -29,9 +29,9 @@ def assert_same(a, b, path="info"):
         assert type(a) is type(b) and a == b, (path, a, b)
 
 
-def homing_actions(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def homing_actions(obs: np.ndarray, rng: np.random.Generator, n_robots: int = 2) -> np.ndarray:
     """Head for the destinations with noise (episodes that end by arrival and by truncation), random powers."""
-    per_robot = obs.reshape(len(obs), -1, 6)
+    per_robot = obs[:, : 6 * n_robots].reshape(len(obs), n_robots, 6)  # the paper's part of the observation
     actions = np.empty((len(obs), per_robot.shape[1], 3), dtype=np.float32)
     actions[..., :2] = 3.0 * (per_robot[..., 2:4] - per_robot[..., 0:2]) + rng.normal(0.0, 0.7, per_robot[..., :2].shape)
     actions[..., 2] = rng.uniform(-1.0, 1.0, per_robot.shape[:2])
@@ -42,6 +42,7 @@ CASES = [
     ("NomaRadioMap-v0", {}),
     ("NomaRadioMapOMAReality-v0", {}),
     ("NomaRadioMapReality-v0", {"inducing": "geodesic", "reward_phase": "combined"}),
+    ("NomaRadioMapReality-v0", {"observation": "goal"}),
 ]
 
 

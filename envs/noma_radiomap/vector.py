@@ -21,6 +21,8 @@ from noma_radiomap import geometry, rewards
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
 from noma_radiomap.env import NomaRadioMapEnv, mission_observation
 from noma_radiomap.propagation import faded_gain, interference_power, linear_to_db, rayleigh_fading
+from noma_radiomap.registration import OBSERVATIONS
+from noma_radiomap.wrappers import RelativeGoalObservation, goal_features
 
 
 @dataclass
@@ -133,6 +135,8 @@ class NomaRadioMapVecEnv(VectorEnv):
         ``reward_phase``, ``inducing``)
     :param max_episode_steps: truncation length (None: the scenario's ``mission.max_steps``; at most that)
     :param render_mode: only None (render a single env to see a mission)
+    :param observation: ``"paper"`` (the env's own) or ``"goal"`` (as
+        :class:`~noma_radiomap.wrappers.RelativeGoalObservation` adds it to a single env)
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -147,7 +151,10 @@ class NomaRadioMapVecEnv(VectorEnv):
         inducing: str = "euclidean",
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
+        observation: str = "paper",
     ) -> None:
+        if observation not in OBSERVATIONS:
+            raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if render_mode is not None:
@@ -160,9 +167,11 @@ class NomaRadioMapVecEnv(VectorEnv):
         self.max_episode_steps = min(limit, env.max_steps)
         self.num_envs = int(num_envs)
         self.render_mode = None
-        self.single_observation_space = env.observation_space
+        self.observation = observation
+        self._goal = RelativeGoalObservation(env) if observation == "goal" else None  # its space and scale
+        self.single_observation_space = env.observation_space if self._goal is None else self._goal.observation_space
         self.single_action_space = env.action_space
-        self.observation_space = batch_space(env.observation_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(env.action_space, self.num_envs)
         self.n_robots = env.n_robots
         self.max_steps = env.max_steps
@@ -325,9 +334,9 @@ class NomaRadioMapVecEnv(VectorEnv):
         return np.take_along_axis(maps, cells[..., None], axis=-1)[..., 0]
 
     def observations(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """The observations of some missions, (rows, 6U) float32."""
+        """The observations of some missions, (rows, 6U) float32 (``observation="goal"``: (rows, 9U))."""
         env = self.template
-        return mission_observation(
+        paper = mission_observation(
             self.positions[rows],
             self.destinations[rows],
             self._gain_db[rows],
@@ -335,6 +344,10 @@ class NomaRadioMapVecEnv(VectorEnv):
             env._room_size,
             env.GAIN_DB_RANGE,
         )
+        if self._goal is None:
+            return paper
+        goal = goal_features(self.positions[rows], self.destinations[rows], self.arrived[rows], self._goal.distance_scale)
+        return np.concatenate([paper, goal], axis=-1).astype(np.float32)
 
     def episode_summaries(self, rows: np.ndarray) -> dict[str, np.ndarray]:
         """:meth:`NomaRadioMapEnv.episode_summary` of some missions, as arrays over the rows."""

@@ -7,6 +7,27 @@ import numpy as np
 from gymnasium import spaces
 
 
+def goal_features(
+    positions: np.ndarray, destinations: np.ndarray, arrived: np.ndarray, distance_scale: float = 10.0
+) -> np.ndarray:
+    """
+    The goal-conditioned features of :class:`RelativeGoalObservation`: per robot the unit vector towards its
+    destination and ``min(d / distance_scale, 1)``, all 0 for a robot that has arrived.
+
+    :param positions: robot positions in metres, shape (..., U, 2)
+    :param destinations: destinations in metres, shape (..., U, 2)
+    :param arrived: arrived flags, shape (..., U)
+    :param distance_scale: distance in metres at which the distance feature saturates at 1
+    :return: float32 array of shape (..., 3 U)
+    """
+    offset = np.asarray(destinations, dtype=np.float64) - np.asarray(positions, dtype=np.float64)
+    distance = np.hypot(offset[..., 0], offset[..., 1])
+    unit = offset / np.maximum(distance, 1e-9)[..., None]
+    features = np.concatenate([unit, np.minimum(distance / distance_scale, 1.0)[..., None]], axis=-1)
+    features[np.asarray(arrived, dtype=bool)] = 0.0
+    return features.reshape(*features.shape[:-2], -1).astype(np.float32)
+
+
 class RelativeGoalObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """
     Append, per robot, the direction to its destination and the distance to it to the paper's observation.
@@ -37,12 +58,7 @@ class RelativeGoalObservation(gym.ObservationWrapper, gym.utils.RecordConstructo
     def goal_features(self) -> np.ndarray:
         """Per robot: unit vector to the destination and scaled distance (0 once arrived), shape (3U,)."""
         base: Any = self.env.unwrapped
-        offset = np.asarray(base.destinations, dtype=np.float64) - np.asarray(base.positions, dtype=np.float64)
-        distance = np.hypot(offset[:, 0], offset[:, 1])
-        unit = offset / np.maximum(distance, 1e-9)[:, None]
-        features = np.concatenate([unit, np.minimum(distance / self.distance_scale, 1.0)[:, None]], axis=1)
-        features[np.asarray(base.arrived, dtype=bool)] = 0.0
-        return features.ravel().astype(np.float32)
+        return goal_features(base.positions, base.destinations, base.arrived, self.distance_scale)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         return np.concatenate([observation, self.goal_features()]).astype(np.float32)

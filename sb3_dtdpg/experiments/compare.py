@@ -162,8 +162,8 @@ def run_compare(
         summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
         title = (
             f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes, "
-            f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seeds, {hyperparams} hyperparameters, "
-            f"{observation} observation)"
+            f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seed{'s' if seeds != 1 else ''}, "
+            f"{hyperparams} hyperparameters, {observation} observation)"
         )
         tables.save_tables(summary, records, out, "results", title)
         tables.print_table(summary, title)

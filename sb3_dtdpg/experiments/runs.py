@@ -811,7 +811,6 @@ class _RunBars:
             TimeElapsedColumn(),
             TextColumn("ETA"),
             TimeRemainingColumn(),
-            TextColumn("{task.description}"),
             disable=not enabled,
         )
         self.runs = self.progress.add_task("", total=n_runs, name="[bold]runs", unit="")
@@ -838,8 +837,10 @@ class _RunBars:
                 )
             self.progress.update(self.running[spec.run_id], completed=record["done"])
 
-    def finished(self, run_id: str, description: str) -> None:
-        """Remove the run's bar and count it as done."""
+    def finished(self, run_id: str, message: str) -> None:
+        """Remove the run's bar, count it as done and print ``message`` above the bars."""
         if run_id in self.running:
             self.progress.remove_task(self.running.pop(run_id))
-        self.progress.update(self.runs, advance=1, description=description)
+        self.progress.update(self.runs, advance=1)
+        if self.enabled:
+            self.progress.console.print(message)
