@@ -111,8 +111,14 @@ def test_reproduce_skips_finished_runs(tmp_path):
     assert set(tables["table_ii"]["paper_mqi"]) == {879.5, 868.5, 876.2, 929.0, 919.0}
     comparison = tables["ddpg_vs_dtdpg"].set_index(["algorithm", "multiple_access"])
     assert comparison.loc[("DDPG", "OMA"), "mqi"] == real["eval"]["summary"]["mqi"] != 12345.0
-    for name in ("table_ii.md", "ddpg_vs_dtdpg.md", "learning_rates.md", "fig_maps.png", "fig_trajectories_noma_oma.png"):
+    for name in ("table_ii.md", "ddpg_vs_dtdpg.md", "learning_rates.md", "paired.md", "fig_maps.png"):
         assert (tmp_path / name).exists(), name
+    assert (tmp_path / "fig_trajectories_noma_oma.png").exists()
+    paired = tables["paired"].set_index(["contrast", "multiple_access"])
+    # the fake results all score 12345: the paired differences are 0 except against the one real run
+    real_vs_fake = paired.loc[("DT-DPG - DDPG", "OMA"), "mqi"]
+    assert real_vs_fake == pytest.approx(12345.0 - real["eval"]["summary"]["mqi"])
+    assert paired.loc[("DT-DPG - DDPG", "NOMA"), "mqi"] == 0.0
 
 
 def test_reproduce_with_tuned_hyperparameters_compares_the_paper_learning_rate():

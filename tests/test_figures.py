@@ -216,3 +216,32 @@ def test_radio_map_example_out_is_a_folder(tmp_path, capsys):
     assert path == tmp_path / "maps" / "maps_small.png" and path.stat().st_size > 0
     assert str(path) in capsys.readouterr().out
     plt.close("all")
+
+
+def test_paired_differences_pair_by_seed_within_a_configuration():
+    rng = np.random.default_rng(3)
+    rows = []
+    for training in ("radio_map", "rayleigh"):
+        for seed in range(4):
+            luck = rng.normal(0, 50)  # shared by both modes of a seed: pairing must cancel it
+            for mode, offset in (("NOMA", 10.0 + seed), ("OMA", 0.0)):
+                rows.append(
+                    {
+                        "training": training,
+                        "multiple_access": mode,
+                        "seed": seed,
+                        "mqi": 900 + luck + offset,
+                        "success_rate": 1.0 if mode == "NOMA" else 0.75,
+                    }
+                )
+    records = pd.DataFrame(rows)
+    records = records[~((records["training"] == "rayleigh") & (records["seed"] == 3) & (records["multiple_access"] == "OMA"))]
+    paired = tables.paired_differences(records, "multiple_access", "NOMA", "OMA", by=("training",))
+    assert list(paired["training"]) == ["radio_map", "rayleigh"] and list(paired["n"]) == [4, 3]  # unpaired seed left out
+    assert list(paired["contrast"]) == ["NOMA - OMA"] * 2
+    mean, half = tables.mean_ci(np.array([10.0, 11.0, 12.0, 13.0]))
+    assert paired.loc[0, "mqi"] == pytest.approx(mean) and paired.loc[0, "mqi_ci"] == pytest.approx(half)  # luck cancelled
+    assert paired.loc[1, "mqi"] == pytest.approx(11.0) and paired.loc[0, "success_rate"] == pytest.approx(0.25)
+    text = tables.format_paired_markdown(paired, ("training",))
+    assert "| NOMA - OMA | radio_map | 4 | 25 ± 0 | 11.5 ±" in text
+    assert tables.paired_differences(records, "multiple_access", "NOMA", "TDMA", by=("training",)).empty

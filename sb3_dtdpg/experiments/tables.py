@@ -25,6 +25,8 @@ __all__ = [
     "PAPER_MQI_SCALE",
     "format_ci",
     "format_markdown",
+    "format_paired_markdown",
+    "paired_differences",
     "planner_row",
     "print_table",
     "run_records",
@@ -102,6 +104,65 @@ def summarise(records: pd.DataFrame, by: Sequence[str] = ("algorithm", "multiple
         row["train_timesteps"] = float(group["train_timesteps"].mean())
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def paired_differences(
+    records: pd.DataFrame,
+    contrast: str,
+    first: Any,
+    second: Any,
+    by: Sequence[str] = (),
+    metrics: Sequence[str] = ("success_rate", "mqi"),
+) -> pd.DataFrame:
+    """
+    Differences ``first - second`` of the test metrics, paired by seed: for each configuration of ``by``, the runs
+    whose ``contrast`` column is ``first`` against those where it is ``second``, on the seeds both have. The
+    CI is the t-interval of the per-seed differences (paired, so the seed's shared luck cancels out).
+
+    :param records: output of :func:`run_records`
+    :param contrast: the column that tells the two sides apart (e.g. ``"multiple_access"``)
+    :param first: its value on the first side (e.g. ``"NOMA"``)
+    :param second: its value on the second side
+    :param by: columns that define a configuration (pairs are formed within one)
+    :param metrics: the metrics to difference
+    :return: one row per configuration with at least one pair: the ``by`` columns, ``contrast`` (text),
+        ``n`` (pairs), ``<metric>`` (mean difference) and ``<metric>_ci`` columns
+    """
+    rows = []
+    groups = records.groupby(list(by), sort=False, dropna=False) if by else [((), records)]
+    for key, group in groups:
+        sides = [group[group[contrast] == value].set_index("seed") for value in (first, second)]
+        seeds = sorted(set(sides[0].index) & set(sides[1].index))
+        if not seeds:
+            continue
+        row: dict[str, Any] = dict(zip(by, key if isinstance(key, tuple) else (key,), strict=False))
+        row.update(contrast=f"{first} - {second}", n=len(seeds))
+        for metric in metrics:
+            difference = sides[0].loc[seeds, metric].to_numpy(float) - sides[1].loc[seeds, metric].to_numpy(float)
+            row[metric], row[f"{metric}_ci"] = mean_ci(difference)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def format_paired_markdown(differences: pd.DataFrame, columns: Sequence[str]) -> str:
+    """
+    :param differences: output of :func:`paired_differences` (several concatenated are fine)
+    :param columns: the label columns to show after the contrast
+    :return: a Markdown table: contrast, labels, pairs, success difference (points) and MQI difference
+    """
+    header = ["Contrast", *columns, "Pairs (seeds)", "Success (points)", "Test MQI"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    for _, row in differences.iterrows():
+        labels = [f"{row[c]:g}" if isinstance(row[c], float) else str(row[c]) for c in columns]
+        cells = [
+            str(row["contrast"]),
+            *labels,
+            str(int(row["n"])),
+            format_ci(row["success_rate"], row["success_rate_ci"], 0, 100.0),
+            format_ci(row["mqi"], row["mqi_ci"]),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def planner_row(name: str, multiple_access: str, result: EvaluationResult) -> dict[str, Any]:
