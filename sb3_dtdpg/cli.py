@@ -285,6 +285,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         train=not args.report_only,
         hyperparams=args.hyperparams,
         observation=args.observation,
+        experiments=args.experiments,
     )
     if args.budget != "paper":
         paper = BUDGETS["paper"]
@@ -496,6 +497,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_seeds(p)
     p.add_argument("--out", default="results/reproduce", help="output folder (default: results/reproduce)")
     p.add_argument("--report-only", action="store_true", help="only re-draw tables and figures from the finished runs")
+    p.add_argument(
+        "--experiments",
+        nargs="+",
+        choices=("table_ii", "ddpg_vs_dtdpg", "learning_rates"),
+        default=None,
+        help="train only the runs of these experiments (default: all); the tables use every finished run",
+    )
     _add_common_run_options(p, HYPERPARAMS)
     p.set_defaults(func=_cmd_reproduce)
     return parser

@@ -207,3 +207,15 @@ def _every_step(init):
         self.interval = 0.0
 
     return wrapped
+
+
+def test_reproduce_trains_only_the_chosen_experiments(tmp_path):
+    with pytest.raises(ValueError, match=r"experiments: unknown \['table_iii'\]"):
+        run_reproduce(tmp_path, budget="_micro", seeds=1, experiments=["table_iii"])
+    tables = run_reproduce(tmp_path, budget="_micro", seeds=1, progress=False, experiments=["ddpg_vs_dtdpg"])
+    experiments = reproduce_specs(MICRO, seeds=1)
+    chosen = {s.run_id for s in experiments["ddpg_vs_dtdpg"]}
+    for spec in {s for specs in experiments.values() for s in specs}:
+        assert result_path(tmp_path, spec).exists() == (spec.run_id in chosen), spec.run_id
+    # the other experiments' tables are drawn from the finished runs they share (the radio-map DT-DPG runs)
+    assert set(tables["table_ii"]["training"]) == {"radio_map"} and len(tables["ddpg_vs_dtdpg"]) > 4

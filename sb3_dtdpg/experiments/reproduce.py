@@ -18,6 +18,7 @@ DDPG vs DT-DPG. A run whose result file exists is not re-run, so the job can be 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +30,7 @@ from sb3_dtdpg.experiments import tables
 from sb3_dtdpg.experiments.compare import evaluate_planners
 from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
-__all__ = ["LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
+__all__ = ["EXPERIMENTS", "LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
 
 #: Paper Table II: (MA mode, approach, training episodes) -> MQI over 20 Rayleigh test episodes.
 PAPER_TABLE_II: dict[tuple[str, str, str], float] = {
@@ -40,6 +41,8 @@ PAPER_TABLE_II: dict[tuple[str, str, str], float] = {
     ("NOMA", "reality", "E"): 919.0,
     ("NOMA", "reality", "L"): 929.0,
 }
+#: The experiments of :func:`reproduce_specs`, by name.
+EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates")
 #: The paper's two learning rates (Fig. 6).
 LEARNING_RATES = (1e-4, 1e-3)
 
@@ -184,6 +187,18 @@ def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[s
     return dip
 
 
+def _check_arguments(seeds: int, observation: str, experiments: Sequence[str] | None) -> None:
+    from noma_radiomap.registration import OBSERVATIONS
+
+    if seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds!r}")
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+    unknown = sorted(set(experiments or ()) - set(EXPERIMENTS))
+    if unknown:
+        raise ValueError(f"experiments: unknown {unknown}, expected some of {list(EXPERIMENTS)}")
+
+
 def run_reproduce(
     out: str | Path = "results/reproduce",
     budget: str | Budget = "tiny",
@@ -193,6 +208,7 @@ def run_reproduce(
     train: bool = True,
     hyperparams: str = "paper",
     observation: str = "paper",
+    experiments: Sequence[str] | None = None,
 ) -> dict[str, pd.DataFrame]:
     """
     Run (or resume) every experiment and write its tables (Markdown + CSV) and figures under ``out``.
@@ -206,6 +222,8 @@ def run_reproduce(
     :param train: run the unfinished runs; False only re-draws the tables and figures from the finished ones
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
     :param observation: ``"paper"`` (the paper's state) or ``"goal"`` (the goal-conditioned extension)
+    :param experiments: train only the runs of these experiments (names of :data:`EXPERIMENTS`; None: all); the
+        tables and figures are drawn from every finished run either way
     :return: the tables, by name
     :raises ValueError: on a bad argument, or a budget that cannot train a run (before any run starts)
     :raises OutputBusyError: another job is using ``out``
@@ -213,24 +231,21 @@ def run_reproduce(
         scenario or hyperparameters): use another folder
     """
 
-    from noma_radiomap.registration import OBSERVATIONS
-
-    if observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
     budget = get_budget(budget)
     seeds = budget.seeds if seeds is None else seeds
-    if seeds < 1:
-        raise ValueError(f"seeds must be >= 1, got {seeds!r}")
+    _check_arguments(seeds, observation, experiments)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
+        chosen = experiments
         experiments = reproduce_specs(budget, seeds, hyperparams, observation)
         unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
         # Seed by seed, so that an interrupted job has whole seeds of every experiment.
         unique.sort(key=lambda spec: spec.seed)
         if train:
-            report = run_many(unique, out, n_workers=n_workers, progress=progress)
+            wanted = {s.run_id for name in (chosen or EXPERIMENTS) for s in experiments[name]}
+            report = run_many([s for s in unique if s.run_id in wanted], out, n_workers=n_workers, progress=progress)
             for run_id, error in report.failed.items():
                 print(f"run {run_id} failed: {error}")
         results = {spec.run_id: load_result(out, spec) for spec in unique}
