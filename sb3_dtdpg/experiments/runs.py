@@ -812,6 +812,7 @@ class _RunBars:
             TextColumn("ETA"),
             TimeRemainingColumn(),
             disable=not enabled,
+            refresh_per_second=1,  # the bars move by episodes; a faster refresh costs the parent a tenth of a core
         )
         self.runs = self.progress.add_task("", total=n_runs, name="[bold]runs", unit="")
         self.running: dict[str, Any] = {}
