@@ -1,5 +1,5 @@
 """The radio map (paper Eq. (16)-(19)): shapes and indexing, cache, the SINR formula, and the "communication
-matters" properties of the built-in ``mall`` scenario (docs/SCENARIOS.md)."""
+matters" properties of the built-in ``mall`` and ``warehouse`` scenarios (docs/SCENARIOS.md)."""
 
 import math
 
@@ -20,7 +20,7 @@ def small():
     return RadioMap.for_scenario(load_scenario("small"))
 
 
-@pytest.mark.parametrize("name", ["small", "mall"])
+@pytest.mark.parametrize("name", ["small", "mall", "warehouse"])
 def test_shapes_and_keys(name):
     scenario = load_scenario(name)
     radio_map = RadioMap.for_scenario(scenario)
@@ -50,7 +50,7 @@ def test_indexing_convention(small):
     np.testing.assert_array_equal(back[1], gy)
 
 
-@pytest.mark.parametrize("name", ["small", "mall"])
+@pytest.mark.parametrize("name", ["small", "mall", "warehouse"])
 def test_maps_are_indexed_x_then_y(name):
     # The AP's path loss is smallest in the AP's own cell (ties where the AP sits on a grid corner):
     # catches a transposed map (test_sinr_formula_recomputed_independently checks arbitrary cells).
@@ -119,33 +119,40 @@ def test_outage_map_is_the_qos_test(mall):
     np.testing.assert_array_equal(mall.outage_map(), mall.sinr_map_db < 10 * math.log10(3))
 
 
-def test_mall_outage_share_in_range(mall):
+COMMUNICATION_MATTERS = ["mall", "warehouse"]
+
+
+@pytest.mark.parametrize("name", COMMUNICATION_MATTERS)
+def test_outage_share_in_range(name):
     # docs/SCENARIOS.md: with the whole AP power to one robot, 15 % to 60 % of free cells fail the QoS.
-    share = mall.outage_share()
+    radio_map = RadioMap.for_scenario(load_scenario(name))
+    share = radio_map.outage_share()
     assert 0.15 <= share <= 0.60
-    assert share == pytest.approx(mall.outage_map()[~mall.blocked].sum() / (~mall.blocked).sum())
+    assert share == pytest.approx(radio_map.outage_map()[~radio_map.blocked].sum() / (~radio_map.blocked).sum())
 
 
-def test_mall_shortest_path_crosses_outage_but_a_detour_avoids_it(mall):
+@pytest.mark.parametrize("name", COMMUNICATION_MATTERS)
+def test_shortest_path_crosses_outage_but_a_detour_avoids_it(name):
     # docs/SCENARIOS.md: for at least one robot (and destination), every shortest path from the start region to
     # the destination crosses outage cells, while a path avoiding them exists and is at most 1.5 x as long.
-    scenario, res = mall.scenario, mall.resolution
-    outage = mall.outage_map()
+    radio_map = RadioMap.for_scenario(load_scenario(name))
+    scenario, res = radio_map.scenario, radio_map.resolution
+    outage = radio_map.outage_map()
     found = []
     for u, robot in enumerate(scenario.robots):
-        starts = mall.start_cells(u)
+        starts = radio_map.start_cells(u)
         for destination in robot.destinations:
-            goal = tuple(int(i) for i in mall.cell_index(np.array(destination)))
-            shortest = G.grid_distance_field(mall.blocked, goal, res)[starts[:, 0], starts[:, 1]]
-            avoiding = G.grid_distance_field(mall.blocked | outage, goal, res)[starts[:, 0], starts[:, 1]]
+            goal = tuple(int(i) for i in radio_map.cell_index(np.array(destination)))
+            shortest = G.grid_distance_field(radio_map.blocked, goal, res)[starts[:, 0], starts[:, 1]]
+            avoiding = G.grid_distance_field(radio_map.blocked | outage, goal, res)[starts[:, 0], starts[:, 1]]
             if np.all((avoiding > shortest + 1e-9) & (avoiding <= 1.5 * shortest)):
                 found.append((u, destination))
     assert found, "no robot/destination where the shortest path must cross outage cells but a short detour avoids them"
     # and the shortest path found explicitly does cross outage cells
     u, destination = found[0]
-    start = mall.start_cells(u)[0]
-    goal = tuple(int(i) for i in mall.cell_index(np.array(destination)))
-    cells, _ = G.shortest_path(mall.blocked, tuple(start), goal, resolution=res)
+    start = radio_map.start_cells(u)[0]
+    goal = tuple(int(i) for i in radio_map.cell_index(np.array(destination)))
+    cells, _ = G.shortest_path(radio_map.blocked, tuple(start), goal, resolution=res)
     assert outage[cells[:, 0], cells[:, 1]].any()
 
 

@@ -4,10 +4,12 @@ import copy
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
-from noma_radiomap import Scenario, list_scenarios, load_scenario
+from noma_radiomap import RadioMap, Scenario, list_scenarios, load_scenario
+from noma_radiomap.motion import GridMotion
 
 
 @pytest.fixture(scope="module")
@@ -17,7 +19,7 @@ def small_dict():
 
 def test_builtins_listed_and_load():
     names = list_scenarios()
-    assert {"mall", "small"} <= set(names)
+    assert {"mall", "small", "warehouse"} <= set(names)
     for name in names:
         scenario = load_scenario(name)
         assert scenario.name == name
@@ -248,3 +250,26 @@ def test_empty_yaml_file(tmp_path):
     path.write_text("")
     with pytest.raises(ValueError, match=r"empty\.yaml: scenario: expected a mapping, got None"):
         load_scenario(Path(path))
+
+
+@pytest.mark.parametrize("name", ["mall", "warehouse"])
+def test_destinations_reachable_by_straight_motion(name):
+    # docs/SCENARIOS.md ("mall design"): every destination is reached from every start cell by moving at full
+    # speed straight at it, sliding along walls (no concave trap), well within the episode's step limit.
+    scenario = load_scenario(name)
+    radio_map = RadioMap.for_scenario(scenario)
+    motion = GridMotion(
+        radio_map.blocked, scenario.room, scenario.robot.v_max * scenario.mission.time_step, scenario.robot.arrival_radius
+    )
+    for u, robot in enumerate(scenario.robots):
+        starts = radio_map.cell_center(*radio_map.start_cells(u).T)
+        for destination in robot.destinations:
+            goal = np.array([destination], dtype=float)
+            for start in starts:
+                position = start.reshape(1, 2)
+                for _ in range(scenario.mission.max_steps // 4):
+                    heading = (goal - position) / np.linalg.norm(goal - position)
+                    position, arrived = motion.move(position, heading, goal)
+                    if arrived[0]:
+                        break
+                assert arrived[0], f"{name}: robot {u} from {start} stops at {position[0]}, short of {destination}"

@@ -687,7 +687,7 @@ def list_scenarios() -> list[str]:
     """
     Names of the built-in scenarios (the YAML files shipped in ``noma_radiomap/scenarios``).
 
-    :return: sorted names, e.g. ``["mall", "small"]``
+    :return: sorted names, e.g. ``["mall", "small", "warehouse"]``
     """
     folder = resources.files("noma_radiomap") / "scenarios"
     return sorted(entry.name[: -len(".yaml")] for entry in folder.iterdir() if entry.name.endswith(".yaml"))
