@@ -245,3 +245,12 @@ def test_paired_differences_pair_by_seed_within_a_configuration():
     text = tables.format_paired_markdown(paired, ("training",))
     assert "| NOMA - OMA | radio_map | 4 | 25 ± 0 | 11.5 ±" in text
     assert tables.paired_differences(records, "multiple_access", "NOMA", "TDMA", by=("training",)).empty
+    records["learning_rate"] = 1e-3
+    both = pd.concat(
+        [
+            tables.paired_differences(records, "multiple_access", "NOMA", "OMA", by=("training", "learning_rate")),
+            tables.paired_differences(records, "training", "radio_map", "rayleigh", by=("multiple_access",)),
+        ]
+    )
+    text = tables.format_paired_markdown(both, ("training", "multiple_access", "learning_rate"))
+    assert "| NOMA - OMA | radio_map | - | 0.001 | 4 |" in text and "nan" not in text  # absent columns show "-"

@@ -194,7 +194,8 @@ def plot_learning_curves(
         if transfers:
             handles.append(Line2D([], [], color="0.3", ls=":", lw=0.8))
             labels.append("transfer to the second phase (DT-DPG)")
-        fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 3), fontsize=8, frameon=False)
+        columns = 3 if len(tags) > 1 else 2  # one 6-inch panel holds two legend columns, not three
+        fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), columns), fontsize=8, frameon=False)
     return _save(fig, path, title)
 
 

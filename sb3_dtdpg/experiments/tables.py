@@ -153,7 +153,7 @@ def format_paired_markdown(differences: pd.DataFrame, columns: Sequence[str]) ->
     header = ["Contrast", *columns, "Pairs (seeds)", "Success (points)", "Test MQI"]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     for _, row in differences.iterrows():
-        labels = [f"{row[c]:g}" if isinstance(row[c], float) else str(row[c]) for c in columns]
+        labels = [_label(row[c]) for c in columns]
         cells = [
             str(row["contrast"]),
             *labels,
@@ -163,6 +163,13 @@ def format_paired_markdown(differences: pd.DataFrame, columns: Sequence[str]) ->
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _label(value: Any) -> str:
+    """A label cell: ``-`` where a row has no value for the column (NaN), numbers in their short form."""
+    if isinstance(value, float):
+        return "-" if math.isnan(value) else f"{value:g}"
+    return str(value)
 
 
 def planner_row(name: str, multiple_access: str, result: EvaluationResult) -> dict[str, Any]:
