@@ -34,7 +34,6 @@ _HYPERPARAMS_HELP = (
     "paper: Table I (the default of td3, sac and tqc, which have no tuned set)"
 )
 _MODES = ("noma", "oma")
-_OBSERVATIONS = ("paper", "goal")
 _OBSERVATION_HELP = (
     "goal: the paper's state plus each robot's direction and distance to its destination (an extension, "
     "docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget); paper: the paper's state only"
@@ -378,14 +377,17 @@ def _add_seeds(p: argparse.ArgumentParser) -> None:
 
 
 def _add_common_run_options(p: argparse.ArgumentParser, hyperparams: tuple[str, ...]) -> None:
+    from noma_radiomap.registration import OBSERVATIONS
+
     p.add_argument("--hyperparams", choices=hyperparams, default=None, help=_HYPERPARAMS_HELP)
-    p.add_argument("--observation", choices=_OBSERVATIONS, default="goal", help=_OBSERVATION_HELP + " (default: goal)")
+    p.add_argument("--observation", choices=OBSERVATIONS, default="goal", help=_OBSERVATION_HELP + " (default: goal)")
     p.add_argument("--workers", type=_positive, default=None, help="parallel processes (default: number of CPUs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """:return: the argument parser of ``sb3-dtdpg``"""
+    from noma_radiomap.registration import OBSERVATIONS
     from sb3_dtdpg import __version__
     from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID, HYPERPARAMS
 
@@ -433,7 +435,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--hyperparams", choices=HYPERPARAMS, default=None, help=_HYPERPARAMS_HELP)
     p.add_argument(
         "--observation",
-        choices=_OBSERVATIONS,
+        choices=OBSERVATIONS,
         default=None,
         help=_OBSERVATION_HELP + " (default: goal on the NomaRadioMap envs)",
     )

@@ -36,6 +36,12 @@ ENV_IDS: dict[str, dict[str, str]] = {
 OBSERVATIONS: tuple[str, ...] = ("paper", "goal")
 
 
+def check_observation(observation: str) -> None:
+    """:raises ValueError: ``observation`` is not one of :data:`OBSERVATIONS`"""
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+
+
 def make_env(observation: str = "paper", **kwargs: Any) -> gym.Env:
     """
     The entry point of the registered ids: :class:`NomaRadioMapEnv` in a ``TimeLimit`` of its scenario's
@@ -47,8 +53,7 @@ def make_env(observation: str = "paper", **kwargs: Any) -> gym.Env:
     :param kwargs: the arguments of :class:`NomaRadioMapEnv`
     :return: the wrapped env
     """
-    if observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+    check_observation(observation)
     env = NomaRadioMapEnv(**kwargs)
     wrapped: gym.Env = TimeLimit(env, max_episode_steps=env.max_steps)
     if observation == "goal":

@@ -21,7 +21,7 @@ from noma_radiomap import geometry, rewards
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
 from noma_radiomap.env import NomaRadioMapEnv, mission_observation
 from noma_radiomap.propagation import faded_gain, interference_power, linear_to_db, rayleigh_fading
-from noma_radiomap.registration import OBSERVATIONS
+from noma_radiomap.registration import check_observation
 from noma_radiomap.wrappers import RelativeGoalObservation, goal_features
 
 
@@ -153,8 +153,7 @@ class NomaRadioMapVecEnv(VectorEnv):
         render_mode: str | None = None,
         observation: str = "paper",
     ) -> None:
-        if observation not in OBSERVATIONS:
-            raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+        check_observation(observation)
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if render_mode is not None:

@@ -126,7 +126,7 @@ def run_compare(
     :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
         scenario or hyperparameters): use another folder
     """
-    from noma_radiomap.registration import OBSERVATIONS
+    from noma_radiomap.registration import check_observation
     from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
     from sb3_dtdpg.experiments import plots, tables
 
@@ -141,8 +141,7 @@ def run_compare(
         raise ValueError(f"modes: expected 'noma' and/or 'oma', got {bad_modes}")
     for algo in algos:
         check_hyperparams(algo, hyperparams)  # before any run
-    if observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+    check_observation(observation)
     seeds = budget.seeds if seeds is None else seeds
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")

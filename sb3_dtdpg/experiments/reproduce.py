@@ -188,12 +188,11 @@ def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[s
 
 
 def _check_arguments(seeds: int, observation: str, experiments: Sequence[str] | None) -> None:
-    from noma_radiomap.registration import OBSERVATIONS
+    from noma_radiomap.registration import check_observation
 
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds!r}")
-    if observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+    check_observation(observation)
     unknown = sorted(set(experiments or ()) - set(EXPERIMENTS))
     if unknown:
         raise ValueError(f"experiments: unknown {unknown}, expected some of {list(EXPERIMENTS)}")

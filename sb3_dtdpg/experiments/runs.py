@@ -410,10 +410,8 @@ class RunProgress(BaseCallback):
 
     def _write(self) -> None:
         done = self.n_episodes if self.unit == "episodes" else self.num_timesteps
-        data = {"done": done, "total": self.total, "unit": self.unit, "episodes": self.n_episodes}
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        tmp.write_text(json.dumps(data))
-        os.replace(tmp, self.path)  # a reader sees the old or the new file, never half of one
+        text = json.dumps({"done": done, "total": self.total, "unit": self.unit, "episodes": self.n_episodes})
+        atomic_write(self.path, lambda tmp: Path(tmp).write_text(text))  # read while written by run_many
         self._last = time.monotonic()
 
     def _on_step(self) -> bool:
