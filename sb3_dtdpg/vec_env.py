@@ -64,7 +64,7 @@ class MissionVecEnv(VecEnv):
         result = vec.step_missions(self._actions, slice(None))
         obs = vec.observations()
         dones = result.terminated | result.truncated
-        infos = [result.info(k) for k in range(self.num_envs)]
+        infos = result.infos()
         for k in range(self.num_envs):
             infos[k]["TimeLimit.truncated"] = bool(result.truncated[k] and not result.terminated[k])
         ended = np.flatnonzero(dones)

@@ -7,6 +7,7 @@ never leaves the room nor stands in a blocked cell.
 """
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -198,9 +199,9 @@ class GridMotion:
         low_x, high_x = np.minimum(x0, x1) - margin, np.maximum(x0, x1) + margin
         low_y, high_y = np.minimum(y0, y1) - margin, np.maximum(y0, y1) + margin
         inside = (low_x >= 0.0) & (low_y >= 0.0) & (high_x < self.width) & (high_y < self.depth)
-        ix0, iy0 = self.room.cell_index(np.stack([low_x, low_y], axis=-1))
-        ix1, iy1 = self.room.cell_index(np.stack([high_x, high_y], axis=-1))
-        ix1, iy1 = ix1 + 1, iy1 + 1
+        # Both corners in one cell_index call: the number of numpy calls is the cost on small batches.
+        ix, iy = self.room.cell_index(np.stack([np.stack([low_x, low_y], axis=-1), np.stack([high_x, high_y], axis=-1)]))
+        ix0, iy0, ix1, iy1 = ix[0], iy[0], ix[1] + 1, iy[1] + 1
         table = self._blocked_table
         return inside & (table[ix1, iy1] - table[ix0, iy1] - table[ix1, iy0] + table[ix0, iy0] == 0)
 
@@ -223,8 +224,9 @@ class GridMotion:
         """
         positions = np.asarray(positions, dtype=np.float64)
         x, y = positions[..., 0].copy(), positions[..., 1].copy()
-        gx, gy = np.asarray(destinations, dtype=np.float64)[..., 0], np.asarray(destinations, dtype=np.float64)[..., 1]
-        free, _, _ = self._free_cells(x, y)
+        goals = np.asarray(destinations, dtype=np.float64)
+        gx, gy = goals[..., 0], goals[..., 1]
+        free, ix, iy = self._free_cells(x, y)
         if not free.all():
             index = tuple(int(i) for i in np.argwhere(~free)[0])
             raise ValueError(f"positions{list(index)}: {positions[index].tolist()} is outside the room or in a blocked cell")
@@ -238,29 +240,55 @@ class GridMotion:
         sx, sy = step[..., 0] * scale, step[..., 1] * scale
         clear = self._boxes_clear(x, y, x + n_substeps * sx, y + n_substeps * sy)
         moving = np.asarray(active, dtype=bool).copy()
+        slide = _Slide(sx != 0.0, sy != 0.0, np.abs(sx) >= np.abs(sy))
         for _ in range(n_substeps):
-            moving &= ~((x - gx) * (x - gx) + (y - gy) * (y - gy) <= radius_sq)
+            dx, dy = x - gx, y - gy
+            moving &= dx * dx + dy * dy > radius_sq
             if not moving.any():
                 break
-            nx_, ny_ = self._substep(x, y, sx, sy, clear)
-            x, y = np.where(moving, nx_, x), np.where(moving, ny_, y)
+            tx, ty = x + sx, y + sy
+            if clear[moving].all():
+                x, y = np.where(moving, tx, x), np.where(moving, ty, y)
+                continue
+            take_x, take_y, nix, niy = self._substep(tx, ty, ix, iy, clear, slide)
+            take_x &= moving
+            take_y &= moving
+            x, y = np.where(take_x, tx, x), np.where(take_y, ty, y)
+            ix, iy = np.where(take_x, nix, ix), np.where(take_y, niy, iy)
         arrived = (x - gx) * (x - gx) + (y - gy) * (y - gy) <= radius_sq
         return np.stack([x, y], axis=-1), arrived
 
     def _substep(
-        self, x: np.ndarray, y: np.ndarray, sx: np.ndarray, sy: np.ndarray, clear: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_step` on arrays (``clear``: the fast path, no collision test); returns the new points."""
-        ix, iy = self.room.cell_index(np.stack([x, y], axis=-1))
-        tx, ty = x + sx, y + sy
-        free, nix, niy = self._free_cells(tx, ty)
+        self, tx: np.ndarray, ty: np.ndarray, ix: np.ndarray, iy: np.ndarray, clear: np.ndarray, slide: "_Slide"
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """
+        :meth:`_step` on arrays, from free points in cells ``(ix, iy)`` to the targets ``(tx, ty)``
+        (``clear``: the fast path, no collision test).
+
+        A point's cell index on one axis depends only on its coordinate on that axis, so the three points
+        :meth:`_step` tests, ``(tx, ty)``, ``(tx, y)`` and ``(x, ty)``, need only the cells of ``tx`` and
+        ``ty`` besides the current ones.
+
+        :return: whether each robot takes its x and its y component, and the cells of ``tx`` and ``ty``
+        """
+        nix, niy = self.room.cell_index(np.stack([tx, ty], axis=-1))
+        inside_x = (tx >= 0.0) & (tx < self.width)
+        inside_y = (ty >= 0.0) & (ty < self.depth)
+        blocked_x, blocked_y = self.blocked[nix, iy], self.blocked[ix, niy]
+        free = inside_x & inside_y & ~self.blocked[nix, niy]
         straight = (nix == ix) | (niy == iy)
-        corner_free = ~(self.blocked[nix, iy] | self.blocked[ix, niy])
-        direct = clear | (free & (straight | corner_free))
-        free_x = self._free_cells(tx, y)[0] & (sx != 0.0)
-        free_y = self._free_cells(x, ty)[0] & (sy != 0.0)
-        slide_x = free_x & (~free_y | (np.abs(sx) >= np.abs(sy)))
+        direct = clear | (free & (straight | ~(blocked_x | blocked_y)))
+        free_x = inside_x & ~blocked_x & slide.has_x
+        free_y = inside_y & ~blocked_y & slide.has_y
+        slide_x = free_x & (~free_y | slide.x_longer)
         slide_y = ~slide_x & free_y
-        new_x = np.where(direct | slide_x, tx, x)
-        new_y = np.where(direct | slide_y, ty, y)
-        return new_x, new_y
+        return direct | slide_x, direct | slide_y, nix, niy
+
+
+class _Slide(NamedTuple):
+    """Per robot, for the sliding rule of :meth:`GridMotion._substep`: which components are non-zero, and
+    whether the x component is at least as long as the y component."""
+
+    has_x: np.ndarray
+    has_y: np.ndarray
+    x_longer: np.ndarray

@@ -41,17 +41,24 @@ class BatchStep:
     outage: np.ndarray
     gain_db: np.ndarray
 
-    def info(self, k: int) -> dict[str, Any]:
-        """The single env's ``info`` of the ``k``-th stepped mission (without the episode summary)."""
-        return {
-            "reward_components": {name: float(value[k]) for name, value in self.components.items()},
-            "rate_bps": self.rate_bps[k],
-            "sinr_db": self.sinr_db[k],
-            "outage": self.outage[k],
-            "power_w": self.power_w[k],
-            "gain_db": self.gain_db[k],
-            "decoding_order": self.decoding_order[k],
-        }
+    def infos(self) -> list[dict[str, Any]]:
+        """The single env's ``info`` of each stepped mission (without the episode summary), in row order."""
+        names = list(self.components)
+        values = zip(*(value.tolist() for value in self.components.values()), strict=True)
+        arrays = (self.rate_bps, self.sinr_db, self.outage, self.power_w, self.gain_db, self.decoding_order)
+        per_row = zip(values, *arrays, strict=True)
+        return [
+            {
+                "reward_components": dict(zip(names, components, strict=True)),
+                "rate_bps": rate,
+                "sinr_db": sinr,
+                "outage": outage,
+                "power_w": power,
+                "gain_db": gain,
+                "decoding_order": order,
+            }
+            for components, rate, sinr, outage, power, gain, order in per_row
+        ]
 
 
 class MissionView:
