@@ -36,11 +36,11 @@ def check_action(action: Any, n_robots: int) -> np.ndarray:
         raise ValueError(f"action: expected an array of shape {expected}, got {type(action).__name__} ({error})") from None
     if array.shape != expected:
         raise ValueError(f"action: expected shape {expected} ([dx, dy, power] per robot), got shape {array.shape}")
-    if array.dtype == np.bool_ or not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+    if array.dtype.kind not in "fiu":  # floats and integers; not bool, complex, strings or objects
         raise ValueError(f"action: expected real numbers, got dtype {array.dtype}")
     values = array.astype(np.float64).reshape(n_robots, 3)
-    bad = ~np.isfinite(values)
-    if bad.any():
+    if not np.isfinite(values).all():
+        bad = ~np.isfinite(values)
         u, k = (int(i) for i in np.argwhere(bad)[0])
         raise ValueError(
             f"action[{3 * u + k}] (robot {u}, {COMPONENTS[k]}): expected a finite number, got {values[u, k]!r}; "

@@ -349,7 +349,10 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def _channel(self) -> tuple[np.ndarray, np.ndarray]:
         """Channel at the robots' positions: the linear AP gain and the interference power (U,) each."""
-        gains = self._gain_table[self.scenario.room.flat_cell_index(self.positions)]  # (U, transmitters)
+        room = self.scenario.room
+        # Room.point_cell on Python floats: the cells of Room.flat_cell_index without its numpy calls
+        cells = [ix * room.ny + iy for ix, iy in (room.point_cell(x, y) for x, y in self.positions.tolist())]
+        gains = self._gain_table[cells]  # (U, transmitters)
         if self.channel == "rayleigh":
             gains = faded_gain(gains, rayleigh_fading(self.np_random, gains.shape))
         gain = gains[:, 0]

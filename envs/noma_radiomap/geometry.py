@@ -163,9 +163,10 @@ def distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     :param b: points in metres, broadcastable to ``a``
     :return: distances in metres, shape (...)
     """
-    delta = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
-    dx, dy = delta[..., 0], delta[..., 1]
-    return np.fromiter(map(math.hypot, dx.ravel().tolist(), dy.ravel().tolist()), np.float64, dx.size).reshape(dx.shape)
+    delta = np.subtract(a, b, dtype=np.float64)
+    return np.array([math.hypot(dx, dy) for dx, dy in delta.reshape(-1, 2).tolist()], dtype=np.float64).reshape(
+        delta.shape[:-1]
+    )
 
 
 def region_cells(region: tuple[float, float, float, float], resolution: float, shape: tuple[int, int]) -> np.ndarray:

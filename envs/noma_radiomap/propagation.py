@@ -185,7 +185,7 @@ def sequential_sum(values: np.ndarray) -> np.ndarray:
     values = np.asarray(values, dtype=np.float64)
     if values.shape[-1] == 0:
         return np.zeros(values.shape[:-1])
-    return np.cumsum(values, axis=-1)[..., -1]
+    return values.cumsum(axis=-1)[..., -1]
 
 
 def noise_power_dbm(noise_dbm_per_hz: float, bandwidth_hz: np.ndarray | float) -> np.ndarray:
