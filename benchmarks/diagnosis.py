@@ -23,10 +23,9 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-import multiprocessing as mp
 import os
 import time
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from typing import Any
 
 import numpy as np
@@ -289,7 +288,9 @@ def main() -> None:
         (n, s) for n in args.configs for s in args.seeds if not os.path.exists(os.path.join(args.out, f"{n}_seed{s}.json"))
     ]
     print(f"{len(todo)} runs to do ({len(args.configs) * len(args.seeds) - len(todo)} already done) -> {args.out}")
-    with ProcessPoolExecutor(max_workers=args.workers, mp_context=mp.get_context("spawn")) as pool:
+    from sb3_dtdpg.experiments.runs import worker_pool  # its workers end with this process
+
+    with worker_pool(args.workers) as pool:
         jobs: dict[Future, tuple[str, int]] = {pool.submit(run, n, s, args): (n, s) for n, s in todo}
         while jobs:
             done, _ = wait(jobs, return_when=FIRST_COMPLETED)

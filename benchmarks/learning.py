@@ -17,10 +17,9 @@ incl. per-episode curves) and ``<out>/learning.csv`` (one row per seed and repla
 import argparse
 import csv
 import json
-import multiprocessing as mp
 import os
 import time
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from typing import Any
 
 import numpy as np
@@ -189,7 +188,9 @@ def main() -> None:
     phase2: list[dict[str, Any]] = []
     started = time.perf_counter()
     # Phase-1 runs first; each seed's phase-2 branches start as soon as its phase 1 is done
-    with ProcessPoolExecutor(max_workers=args.workers, mp_context=mp.get_context("spawn")) as pool:
+    from sb3_dtdpg.experiments.runs import worker_pool  # its workers end with this process
+
+    with worker_pool(args.workers) as pool:
         jobs: dict[Future, tuple[str, int, str | None]] = {}
         for i, seed in enumerate(args.seeds):
             jobs[pool.submit(run_phase1, seed, args, i % args.workers)] = ("phase1", seed, None)

@@ -23,10 +23,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing as mp
 import os
 import time
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from typing import Any
 
 import numpy as np
@@ -178,7 +177,9 @@ def main() -> None:
 
     todo = [(m, s) for m in args.methods for s in args.seeds if not os.path.exists(path(m, s))]
     print(f"{len(todo)} runs to do -> {args.out}", flush=True)
-    with ProcessPoolExecutor(max_workers=args.workers, mp_context=mp.get_context("spawn")) as pool:
+    from sb3_dtdpg.experiments.runs import worker_pool  # its workers end with this process
+
+    with worker_pool(args.workers) as pool:
         planner_job = pool.submit(planner_mqi, args)
         jobs: dict[Future, tuple[str, int]] = {pool.submit(run, m, s, args): (m, s) for m, s in todo}
         while jobs:

@@ -75,10 +75,10 @@ def test_hostile_scenario_gives_a_named_error_fast(case, small_dict):
     mutate, pattern = HOSTILE[case]
     data = copy.deepcopy(small_dict)
     mutate(data)
-    start = time.perf_counter()
+    start = time.process_time()  # this process's CPU time: the work done, not other load on the machine
     with pytest.raises(ValueError, match=pattern) as error:
         Scenario.from_dict(data)
-    assert time.perf_counter() - start < 2.0
+    assert time.process_time() - start < 2.0
     assert len(str(error.value)) < 4 * MAX_MESSAGE_CHARS + 300
 
 
@@ -150,12 +150,12 @@ HOSTILE_FILES = {
 def test_hostile_file_gives_a_value_error_naming_the_file(tmp_path, case):
     content, pattern = HOSTILE_FILES[case]
     path = _write(tmp_path, content)
-    start = time.perf_counter()
+    start = time.process_time()
     with pytest.raises(ValueError, match=pattern) as error:
         load_scenario(path)
     assert str(error.value).startswith(str(path))
     assert len(str(error.value)) < 1000
-    assert time.perf_counter() - start < 5.0
+    assert time.process_time() - start < 5.0
 
 
 def test_alias_bomb_in_a_name_is_reported_at_once(tmp_path, small_yaml):
@@ -164,10 +164,10 @@ def test_alias_bomb_in_a_name_is_reported_at_once(tmp_path, small_yaml):
         f"&{chr(98 + k)} [{', '.join(['*' + chr(97 + k)] * 9)}]" for k in range(8)
     )
     path = _write(tmp_path, small_yaml.replace("name: small", bomb + "]", 1))
-    start = time.perf_counter()
+    start = time.process_time()
     with pytest.raises(ValueError, match=rf"{path}: name: expected a non-empty string, got \[\[") as error:
         load_scenario(path)
-    assert time.perf_counter() - start < 2.0 and len(str(error.value)) < 1000
+    assert time.process_time() - start < 2.0 and len(str(error.value)) < 1000
 
 
 def test_unreadable_path_is_a_value_error(tmp_path):
