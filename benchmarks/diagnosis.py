@@ -78,6 +78,7 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "vec4": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": -1}},
     "vec4_gs1": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
     "vec8_gs2": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 2}},
+    "vec8_gs1": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
 }
 #: The same ablations with the goal-conditioned observation: ``goal_<name>``.
 CONFIGS.update(
