@@ -175,7 +175,8 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     base = copy.deepcopy(TUNED_KWARGS) if args.base == "tuned" else {}
     model = build_model(config, seed, base, args.episodes, env)
     record: dict[str, Any] = {"config": name, "seed": seed, "train_success": [], "evals": []}
-    start = time.perf_counter()
+    # wall clock, and this process's CPU time (one torch thread: the wall clock of an undisturbed core)
+    start, cpu_start = time.perf_counter(), time.process_time()
 
     class Recorder(BaseCallback):
         def _on_step(self) -> bool:
@@ -186,7 +187,12 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
                 n = len(record["train_success"])
                 if n % args.eval_every == 0:
                     result = evaluate_deterministic(self.model, eval_env, args.eval_missions)
-                    result.update(episode=n, timesteps=self.num_timesteps, seconds=time.perf_counter() - start)
+                    result.update(
+                        episode=n,
+                        timesteps=self.num_timesteps,
+                        seconds=time.perf_counter() - start,
+                        cpu_seconds=time.process_time() - cpu_start,
+                    )
                     record["evals"].append(result)
                     with open(os.path.join(args.out, f"{name}_seed{seed}.log"), "a") as log:
                         print(json.dumps({k: v for k, v in result.items() if k != "misses"}), file=log)
@@ -205,6 +211,7 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
         callbacks.insert(0, DemonstrationCallback(CommAwarePlanner(), config["demos"]))
     model.learn(10**9, callback=callbacks)
     record["seconds"] = time.perf_counter() - start
+    record["cpu_seconds"] = time.process_time() - cpu_start
     model.save(os.path.join(args.out, f"{name}_seed{seed}"))
     record["timesteps"] = int(model.num_timesteps)
     record.update(figures(record["train_success"], record["evals"]))
