@@ -241,9 +241,13 @@ class GridMotion:
         clear = self._boxes_clear(x, y, x + n_substeps * sx, y + n_substeps * sy)
         moving = np.asarray(active, dtype=bool).copy()
         slide = _Slide(sx != 0.0, sy != 0.0, np.abs(sx) >= np.abs(sy))
+
+        def within(px: np.ndarray, py: np.ndarray) -> np.ndarray:
+            dx, dy = px - gx, py - gy
+            return dx * dx + dy * dy <= radius_sq
+
         for _ in range(n_substeps):
-            dx, dy = x - gx, y - gy
-            moving &= dx * dx + dy * dy > radius_sq
+            moving &= ~within(x, y)
             if not moving.any():
                 break
             tx, ty = x + sx, y + sy
@@ -255,8 +259,7 @@ class GridMotion:
             take_y &= moving
             x, y = np.where(take_x, tx, x), np.where(take_y, ty, y)
             ix, iy = np.where(take_x, nix, ix), np.where(take_y, niy, iy)
-        arrived = (x - gx) * (x - gx) + (y - gy) * (y - gy) <= radius_sq
-        return np.stack([x, y], axis=-1), arrived
+        return np.stack([x, y], axis=-1), within(x, y)
 
     def _substep(
         self, tx: np.ndarray, ty: np.ndarray, ix: np.ndarray, iy: np.ndarray, clear: np.ndarray, slide: "_Slide"

@@ -148,6 +148,18 @@ class Room:
         nx, ny = self.shape
         return min(int(x / self.resolution), nx - 1), min(int(y / self.resolution), ny - 1)
 
+    def point_flat_cell(self, x: float, y: float) -> int:
+        """
+        The flat cell index ``ix * ny + iy`` of one point of the room on Python floats: :meth:`flat_cell_index`
+        without numpy (the single env's per-step lookup).
+
+        :param x: x in metres
+        :param y: y in metres
+        :return: the flat index
+        """
+        ix, iy = self.point_cell(x, y)
+        return ix * self.ny + iy
+
     def cell_center(self, ix: np.ndarray | int, iy: np.ndarray | int) -> np.ndarray:
         """
         Centres of cells: ``((ix + 0.5) res, (iy + 0.5) res)``.
