@@ -39,6 +39,8 @@ CASES: dict[str, tuple[str, dict]] = {
 BARS = {"NomaRadioMap-v0 (radio_map, NOMA)": 0.3, "NomaRadioMapReality-v0 (rayleigh, NOMA)": 0.25}
 VEC_REFERENCE = "DummyVecEnv, 16 single envs"
 VEC_BAR = 10.0
+#: Defaults of the command line and of the functions: steps per round, alternating rounds, vector-env steps.
+STEPS, ROUNDS, VEC_STEPS = 2500, 10, 10000
 
 
 def vec_cases() -> dict[str, object]:
@@ -66,7 +68,7 @@ def vec_steps_per_second(env: object, n_steps: int, rng: np.random.Generator) ->
     return n_calls * n / (time.process_time() - start)
 
 
-def run_vec_benchmark(n_steps: int = 10000, n_rounds: int = 10) -> dict[str, float]:
+def run_vec_benchmark(n_steps: int = VEC_STEPS, n_rounds: int = ROUNDS) -> dict[str, float]:
     """
     :param n_steps: env steps per round (rounded down to whole vector steps)
     :param n_rounds: alternating rounds; the best round of each env counts
@@ -98,7 +100,7 @@ def steps_per_second(env: gym.Env, n_steps: int) -> float:
     return n_steps / (time.process_time() - start)
 
 
-def run_env_benchmark(n_steps: int = 2500, n_rounds: int = 10) -> dict[str, float]:
+def run_env_benchmark(n_steps: int = STEPS, n_rounds: int = ROUNDS) -> dict[str, float]:
     """
     :param n_steps: steps per round
     :param n_rounds: alternating rounds; the best round of each env counts
@@ -120,9 +122,9 @@ def run_env_benchmark(n_steps: int = 2500, n_rounds: int = 10) -> dict[str, floa
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=2500, help="steps per round")
-    parser.add_argument("--rounds", type=int, default=10, help="alternating rounds (best kept)")
-    parser.add_argument("--vec-steps", type=int, default=10000, help="env steps per round of the vector envs (0: skip)")
+    parser.add_argument("--steps", type=int, default=STEPS, help="steps per round")
+    parser.add_argument("--rounds", type=int, default=ROUNDS, help="alternating rounds (best kept)")
+    parser.add_argument("--vec-steps", type=int, default=VEC_STEPS, help="env steps per round of the vector envs (0: skip)")
     args = parser.parse_args()
 
     best = run_env_benchmark(args.steps, args.rounds)
