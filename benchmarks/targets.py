@@ -130,12 +130,13 @@ def _t_interval(values: list[float]) -> tuple[float, float]:
 
 def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argparse.Namespace) -> list[str]:
     """Markdown lines: one row per method and seed, the means, and the paired DT-DPG - DDPG differences."""
+    rule = f" to {args.success_threshold:.0%}" if args.success_threshold else ""
     lines = [
         f"Test: {args.eval_episodes} Rayleigh missions; comm-aware planner {planner['test_mqi']:.1f} MQI, "
         f"{planner['test_success']:.0%} success; {args.episodes} training episodes per run; observation "
         f"{args.observation}; DT-DPG's transfer: {transfer_name(args) or 'early, at 95 % over 20 episodes'}.",
         "",
-        "| method | seed | phase-1 episodes to 95 % | test success | test MQI | MQI / planner | train wall s |",
+        f"| method | seed | phase-1 episodes{rule} | test success | test MQI | MQI / planner | train wall s |",
         "|---|---|---|---|---|---|---|",
     ]
     by_method: dict[str, dict[int, dict[str, Any]]] = {}
@@ -146,7 +147,8 @@ def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argp
         elif r["phase1_reached_95"]:
             phase1 = str(r["phase1_episodes"])
         else:
-            phase1 = f"not reached ({r['phase1_episodes']} ep., last 20 at {r['phase1_rate_at_transfer']:.0%})"
+            ended = "the cap, no early transfer" if "no-early-transfer" in (r.get("transfer") or "") else "not reached"
+            phase1 = f"{ended} ({r['phase1_episodes']} ep., last 20 at {r['phase1_rate_at_transfer']:.0%})"
         lines.append(
             f"| {r['method']} | {r['seed']} | {phase1} | {r['test_success']:.0%} "
             f"| {r['test_mqi']:.1f} ± {r['test_mqi_ci']:.1f} | {r['test_mqi'] / planner['test_mqi']:.3f} "
