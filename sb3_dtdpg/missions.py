@@ -35,7 +35,8 @@ def default_phases(
     :param destination_episodes: Episode budget of the destination phase (default: the paper's 500 training
         episodes, over which its noise decays; the early transfer ends it after 42-152 episodes with the
         goal-conditioned observation, docs/BENCHMARKS.md).
-    :param success_threshold: Early-transfer threshold of the destination phase (``None``: off).
+    :param success_threshold: Early-transfer threshold of the destination phase (``None``: off). Measured
+        against 0.8 and no early transfer in docs/BENCHMARKS.md, "The early-transfer rule".
     :param success_window: Window K of the early-transfer rule.
     :param replay_handling: Replay handling when entering the MQI phase. ``"relabel"`` (the default) trained
         best in ``benchmarks/learning.py`` (docs/BENCHMARKS.md: mean test MQI over 3 seeds 657 vs 602 for
