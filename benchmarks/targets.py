@@ -147,7 +147,8 @@ def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argp
         elif r["phase1_reached_95"]:
             phase1 = str(r["phase1_episodes"])
         else:
-            ended = "the cap, no early transfer" if "no-early-transfer" in (r.get("transfer") or "") else "not reached"
+            # the DT-DPG rows of one summary share the invocation's transfer rule (it is in their file names)
+            ended = "not reached" if args.success_threshold else "the cap, no early transfer"
             phase1 = f"{ended} ({r['phase1_episodes']} ep., last 20 at {r['phase1_rate_at_transfer']:.0%})"
         lines.append(
             f"| {r['method']} | {r['seed']} | {phase1} | {r['test_success']:.0%} "
@@ -212,9 +213,10 @@ def main() -> None:
     args = parser.parse_args()
     os.makedirs(args.out, exist_ok=True)
 
+    variant = f"_{transfer_name(args)}" if transfer_name(args) else ""
+
     def path(method: str, seed: int) -> str:
-        variant = transfer_name(args) if method == "dtdpg" else ""
-        return os.path.join(args.out, f"{method}_{args.observation}{'_' + variant if variant else ''}_seed{seed}.json")
+        return os.path.join(args.out, f"{method}_{args.observation}{variant if method == 'dtdpg' else ''}_seed{seed}.json")
 
     todo = [(m, s) for m in args.methods for s in args.seeds if not os.path.exists(path(m, s))]
     print(f"{len(todo)} runs to do -> {args.out}", flush=True)
@@ -244,8 +246,7 @@ def main() -> None:
                 with open(path(m, s)) as f:
                     records.append(json.load(f))
     lines = summarize(records, planner, args)
-    variant = transfer_name(args)
-    with open(os.path.join(args.out, f"summary_{args.observation}{'_' + variant if variant else ''}.md"), "w") as f:
+    with open(os.path.join(args.out, f"summary_{args.observation}{variant}.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))
 
