@@ -290,7 +290,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         paper = BUDGETS["paper"]
         print(
             f"This was the {args.budget!r} budget ({budget.episodes} training episodes per run). The paper's scale "
-            f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; hours on a laptop): "
+            f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; about an hour on 2 cores): "
             f"sb3-dtdpg reproduce --budget paper --out <folder>"
         )
     return 0
@@ -494,7 +494,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--budget",
         type=_budget,
         default="tiny",
-        help=_budget_help("tiny, the whole pipeline in minutes") + " (hours: sb3-dtdpg reproduce --budget paper)",
+        help=_budget_help("tiny, the whole pipeline in minutes")
+        + " (the paper's scale, about an hour on 2 cores: sb3-dtdpg reproduce --budget paper)",
     )
     _add_seeds(p)
     p.add_argument("--out", default="results/reproduce", help="output folder (default: results/reproduce)")

@@ -184,3 +184,54 @@ def test_normalisation_options_build_the_named_layers(actor_norm, critic_norm, t
 def test_unknown_normalisation_is_an_error_naming_the_option(key):
     with pytest.raises(ValueError, match=f"{key} must be one of .*'group'"):
         _model(policy_kwargs={key: "group"})
+
+
+def _modes(module: nn.Module) -> set[bool]:
+    return {m.training for m in module.modules()}
+
+
+def test_set_training_mode_switches_every_actor_and_critic_layer_and_no_target():
+    model = _model(policy_kwargs=dict(net_arch=[32, 16], actor_norm="layer"))
+    policy = model.policy
+    for mode in (True, False, True):
+        policy.set_training_mode(mode)
+        assert policy.training is mode
+        assert _modes(policy.actor) == {mode} and _modes(policy.critic) == {mode}
+        assert _modes(policy.actor_target) == {False} and _modes(policy.critic_target) == {False}
+
+    # a new actor (as a user replacing it would make) is switched too, not the layers of the old one
+    old_actor = policy.actor
+    policy.actor = policy.make_actor().train(False)
+    policy.set_training_mode(False)  # the actor is in eval mode already; the critic is not
+    policy.set_training_mode(True)
+    assert _modes(policy.actor) == {True}
+    old_actor.train(False)
+    policy.set_training_mode(False)
+    assert _modes(policy.actor) == {False} and _modes(old_actor) == {False}
+
+
+class _CountingFlatten(nn.Flatten):
+    calls: int = 0
+
+    def train(self, mode: bool = True) -> nn.Module:
+        _CountingFlatten.calls += 1
+        return super().train(mode)
+
+
+class _CountingExtractor(th.nn.Module):
+    def __init__(self, observation_space: gym.spaces.Box) -> None:
+        super().__init__()
+        self.features_dim = int(np.prod(observation_space.shape))
+        self.flatten = _CountingFlatten()
+
+    def forward(self, observations: th.Tensor) -> th.Tensor:
+        return self.flatten(observations)
+
+
+def test_set_training_mode_calls_a_layer_s_own_train_method():
+    model = _model(policy_kwargs=dict(net_arch=[16], features_extractor_class=_CountingExtractor))
+    model.policy.set_training_mode(True)
+    before = _CountingFlatten.calls
+    model.policy.set_training_mode(False)
+    assert _CountingFlatten.calls > before
+    assert _modes(model.policy.actor) == {False} and _modes(model.policy.critic) == {False}

@@ -319,13 +319,34 @@ class DTDPGPolicy(TD3Policy):
 
         SB3 calls this twice per env step (``collect_rollouts`` and ``predict``) and once per ``train()``; the
         recursive ``nn.Module.train`` over every layer costs more than a batch-of-one forward pass, so a call
-        that changes nothing returns at once.
+        that changes nothing returns at once, and a switch sets the flag of every layer of the actor and the
+        critic from a list made once (the same flags ``nn.Module.train`` sets; the targets stay in eval mode).
 
         :param mode: if true, set to training mode, else set to evaluation mode
         """
         if self.training == mode and self.actor.training == mode and self.critic.training == mode:
             return
-        super().set_training_mode(mode)
+        modules = self._mode_modules()
+        if modules is None:
+            super().set_training_mode(mode)
+            return
+        for module in modules:
+            # what nn.Module.train does per module, without nn.Module.__setattr__'s checks (a bool is no parameter)
+            object.__setattr__(module, "training", mode)
+        self.training = mode
+
+    def _mode_modules(self) -> list[nn.Module] | None:
+        """
+        Every module of the actor and the critic, listed once per actor/critic object; None when a module has its
+        own ``train`` method (then only ``nn.Module.train`` itself knows what a switch does).
+        """
+        owners = getattr(self, "_mode_modules_owners", (None, None))
+        if owners[0] is not self.actor or owners[1] is not self.critic:
+            modules = [*self.actor.modules(), *self.critic.modules()]
+            plain = all(type(module).train is nn.Module.train for module in modules)
+            self._mode_modules_cache = modules if plain else None
+            self._mode_modules_owners = (self.actor, self.critic)
+        return self._mode_modules_cache
 
     def make_actor(self, features_extractor: BaseFeaturesExtractor | None = None) -> Actor:
         actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)

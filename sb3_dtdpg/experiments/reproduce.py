@@ -214,7 +214,7 @@ def run_reproduce(
 
     :param out: output folder
     :param budget: a budget name or :class:`~sb3_dtdpg.experiments.runs.Budget` (default ``"tiny"``: the whole
-        pipeline in minutes; ``"paper"`` is the paper's scale, hours)
+        pipeline in minutes; ``"paper"`` is the paper's scale, about an hour on 2 cores)
     :param seeds: seeds per configuration (default: the budget's)
     :param n_workers: parallel processes (default: the number of CPUs)
     :param progress: progress bars and printed tables

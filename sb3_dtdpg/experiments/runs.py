@@ -755,6 +755,8 @@ def run_many(
             report.skipped.append(spec.run_id)
         else:
             todo.append(spec)
+    # Longest runs first (the budget is the proxy for their length), so that no long run starts last and runs alone
+    todo.sort(key=lambda spec: spec.timesteps or spec.episodes, reverse=True)
     n_workers = max(1, min(n_workers or os.cpu_count() or 1, len(todo) or 1))
     start = time.perf_counter()
     with _RunBars(out, len(todo), enabled=progress) as bars:
