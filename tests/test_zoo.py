@@ -156,7 +156,9 @@ def test_every_config_builds_its_model_for_every_env_id(name: str, tmp_path: Pat
             assert [phase.reward_phase for phase in model.phases] == ["destination", "mqi"]
             assert model.curriculum_save_path == manager.save_path
         else:
-            assert manager.env_kwargs == {"reward_phase": "combined"}
+            assert manager.env_kwargs == {"reward_phase": "combined", "observation": "goal"}
+        # every file trains on the goal-conditioned observation (9 values per robot) but the paper as printed (6)
+        assert model.observation_space.shape == ((12,) if name == "dtdpg_paper" else (18,))
         model.env.close()
 
 
@@ -173,7 +175,7 @@ def test_plain_ddpg_baseline_is_plain() -> None:
         entry = yaml.safe_load(f)[ENV_ID]
     assert entry["noise_type"] == "ornstein-uhlenbeck"
     assert "phases" not in entry
-    assert entry["env_kwargs"] == {"reward_phase": "combined"}
+    assert entry["env_kwargs"] == {"reward_phase": "combined", "observation": "goal"}
 
 
 def test_zoo_ddpg_is_the_compare_ddpg() -> None:
@@ -198,8 +200,8 @@ def test_yaml_env_kwargs_reach_the_eval_env(tmp_path: Path) -> None:
         manager._preprocess_hyperparams(hyperparams)
         return manager.eval_env_kwargs
 
-    assert eval_kwargs() == {"reward_phase": "combined"}
-    assert eval_kwargs(eval_env_kwargs={"reward_phase": "mqi"}) == {"reward_phase": "mqi"}
+    assert eval_kwargs() == {"reward_phase": "combined", "observation": "goal"}
+    assert eval_kwargs(eval_env_kwargs={"reward_phase": "mqi"}) == {"reward_phase": "mqi", "observation": "goal"}
 
 
 def test_env_kwargs_merge_into_the_config_env_kwargs(tmp_path: Path) -> None:
@@ -211,9 +213,12 @@ def test_env_kwargs_merge_into_the_config_env_kwargs(tmp_path: Path) -> None:
         manager._preprocess_hyperparams(hyperparams)
         return manager.env_kwargs, manager.eval_env_kwargs, saved["env_kwargs"]
 
-    oma = {"reward_phase": "combined", "multiple_access": "oma"}
+    oma = {"reward_phase": "combined", "observation": "goal", "multiple_access": "oma"}
     assert kwargs(env_kwargs={"multiple_access": "oma"}) == (oma, oma, oma)  # reward_phase kept, and saved
-    assert kwargs(env_kwargs={"reward_phase": "mqi"})[0] == {"reward_phase": "mqi"}  # the command line wins
+    assert kwargs(env_kwargs={"reward_phase": "mqi"})[0] == {
+        "reward_phase": "mqi",
+        "observation": "goal",
+    }  # the command line wins
     env, evaluation, _ = kwargs(env_kwargs={"multiple_access": "oma"}, eval_env_kwargs={"channel": "rayleigh"})
     assert env == oma and evaluation == {**oma, "channel": "rayleigh"}
 
