@@ -213,7 +213,8 @@ def main() -> None:
     args = parser.parse_args()
     os.makedirs(args.out, exist_ok=True)
 
-    variant = f"_{transfer_name(args)}" if transfer_name(args) else ""
+    transfer = transfer_name(args)
+    variant = f"_{transfer}" if transfer else ""
 
     def path(method: str, seed: int) -> str:
         return os.path.join(args.out, f"{method}_{args.observation}{variant if method == 'dtdpg' else ''}_seed{seed}.json")

@@ -51,6 +51,14 @@ def simd_level() -> str:
     return platform.machine()
 
 
+#: The scenarios whose radio maps are fingerprinted.
+MAP_SCENARIOS: tuple[str, ...] = ("mall", "small")
+#: The planners' digests are the same on both kinds of CPU recorded below.
+PLANNER_DIGESTS: dict[str, str] = {
+    "shortest": "362e0cd9e9c043c96e2662dd393a552da3d44c753952ddf8d0a9a9d3e88cd13d",
+    "comm_aware": "93d467a892c24aa94153660912ba6e96224683502eb6ccfd4730560bf196cdd7",
+    "comm_aware_oma": "1378beb50df2c787370508b6b1dbc3febc206679723024949fa80d7e5cad0c95",
+}
 #: Digests per :func:`simd_level`: ``x86-64-v3`` recorded on an AVX2 machine, ``x86-64-v4`` on an AVX-512 one (the same
 #: code: the v3 digests also come out on the AVX-512 machine with numpy's AVX-512 kernels switched off,
 #: ``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR"``, except the training digest, where torch's kernels differ too).
@@ -69,11 +77,7 @@ EXPECTED: dict[str, dict] = {
             "mall": "cac89913551549bfed886c018962e2da4fc58a760951ae1cbe4d7d3fb2c17bbc",
             "small": "76470d7a6d7d5b1eecd5de568b595015ba383f215442b57d2d82c462a7664eea",
         },
-        "planners": {
-            "shortest": "362e0cd9e9c043c96e2662dd393a552da3d44c753952ddf8d0a9a9d3e88cd13d",
-            "comm_aware": "93d467a892c24aa94153660912ba6e96224683502eb6ccfd4730560bf196cdd7",
-            "comm_aware_oma": "1378beb50df2c787370508b6b1dbc3febc206679723024949fa80d7e5cad0c95",
-        },
+        "planners": PLANNER_DIGESTS,
         "training": "7c37ea92de25bdf58d29e99de97f21be5e76b720ff59b7d31b6a21ab6a5bb8eb",
     },
     "x86-64-v4": {
@@ -90,11 +94,7 @@ EXPECTED: dict[str, dict] = {
             "mall": "563a69babf31458155e372e991a5498434ecc91cbf1f2c38ba44098155c66cf7",
             "small": "af596e12ed6b715f0e374d3f79fcf86a428fc1035f59588273d42efb9a7108df",
         },
-        "planners": {
-            "shortest": "362e0cd9e9c043c96e2662dd393a552da3d44c753952ddf8d0a9a9d3e88cd13d",
-            "comm_aware": "93d467a892c24aa94153660912ba6e96224683502eb6ccfd4730560bf196cdd7",
-            "comm_aware_oma": "1378beb50df2c787370508b6b1dbc3febc206679723024949fa80d7e5cad0c95",
-        },
+        "planners": PLANNER_DIGESTS,
         "training": "6726978da515208445ab30d0f96d82933a4c65488a32ae2641466df394a18d3a",
     },
 }
@@ -224,7 +224,7 @@ def test_rollout_fingerprint(name: str) -> None:
     assert rollout_digest(env_id, kwargs) == expected("rollouts")[name]
 
 
-@pytest.mark.parametrize("scenario", ["mall", "small"])
+@pytest.mark.parametrize("scenario", MAP_SCENARIOS)
 def test_radio_map_fingerprint(scenario: str) -> None:
     assert map_digest(scenario) == expected("maps")[scenario]
 
@@ -248,7 +248,7 @@ if __name__ == "__main__":
     print(
         {
             "rollouts": {name: rollout_digest(env_id, kwargs) for name, (env_id, kwargs) in ROLLOUTS.items()},
-            "maps": {scenario: map_digest(scenario) for scenario in ("mall", "small")},
+            "maps": {scenario: map_digest(scenario) for scenario in MAP_SCENARIOS},
             "planners": {name: planner_digest(name) for name in PLANNERS},
             "training": training_digest(),
         }

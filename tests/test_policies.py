@@ -199,15 +199,12 @@ def test_set_training_mode_switches_every_actor_and_critic_layer_and_no_target()
         assert _modes(policy.actor) == {mode} and _modes(policy.critic) == {mode}
         assert _modes(policy.actor_target) == {False} and _modes(policy.critic_target) == {False}
 
-    # a new actor (as a user replacing it would make) is switched too, not the layers of the old one
-    old_actor = policy.actor
-    policy.actor = policy.make_actor().train(False)
-    policy.set_training_mode(False)  # the actor is in eval mode already; the critic is not
-    policy.set_training_mode(True)
-    assert _modes(policy.actor) == {True}
-    old_actor.train(False)
+    # a new actor (as a user replacing it would make) is switched too, and the old one's layers no longer are
+    old_actor = policy.actor  # in train mode, as the policy
+    policy.actor = policy.make_actor().train(True)
     policy.set_training_mode(False)
-    assert _modes(policy.actor) == {False} and _modes(old_actor) == {False}
+    assert _modes(policy.actor) == {False}
+    assert _modes(old_actor) == {True}
 
 
 class _CountingFlatten(nn.Flatten):

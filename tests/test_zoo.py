@@ -215,10 +215,8 @@ def test_env_kwargs_merge_into_the_config_env_kwargs(tmp_path: Path) -> None:
 
     oma = {"reward_phase": "combined", "observation": "goal", "multiple_access": "oma"}
     assert kwargs(env_kwargs={"multiple_access": "oma"}) == (oma, oma, oma)  # reward_phase kept, and saved
-    assert kwargs(env_kwargs={"reward_phase": "mqi"})[0] == {
-        "reward_phase": "mqi",
-        "observation": "goal",
-    }  # the command line wins
+    mqi = {"reward_phase": "mqi", "observation": "goal"}
+    assert kwargs(env_kwargs={"reward_phase": "mqi"})[0] == mqi  # the command line wins
     env, evaluation, _ = kwargs(env_kwargs={"multiple_access": "oma"}, eval_env_kwargs={"channel": "rayleigh"})
     assert env == oma and evaluation == {**oma, "channel": "rayleigh"}
 
