@@ -18,7 +18,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 import noma_radiomap  # noqa: F401  (registers the ids)
-from noma_radiomap.vector import NomaRadioMapVecEnv
+from noma_radiomap.vector import BatchStep, NomaRadioMapVecEnv
 
 
 class MissionVecEnv(VecEnv):
@@ -64,11 +64,9 @@ class MissionVecEnv(VecEnv):
         result = vec.step_missions(self._actions, slice(None))
         obs = vec.observations()
         dones = result.terminated | result.truncated
-        infos = result.infos()
-        for k in range(self.num_envs):
-            infos[k]["TimeLimit.truncated"] = bool(result.truncated[k] and not result.terminated[k])
-        ended = np.flatnonzero(dones)
-        if len(ended):
+        infos = step_infos(result)
+        if dones.any():
+            ended = np.flatnonzero(dones)
             summaries = vec.episode_summaries(ended)
             for j, k in enumerate(ended):
                 infos[k].update(
@@ -107,6 +105,33 @@ class MissionVecEnv(VecEnv):
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         raise NotImplementedError("the mission vector env does not render; render a single env (gymnasium.make)")
+
+
+def step_infos(result: BatchStep) -> list[dict[str, Any]]:
+    """
+    The ``info`` of each stepped mission as a ``DummyVecEnv`` of single envs gives it (without the episode
+    summary): the single env's ``info`` and SB3's ``TimeLimit.truncated``.
+
+    :param result: the outcome of a step of the missions
+    :return: one dict per stepped mission, in row order
+    """
+    names = list(result.components)
+    components = zip(*(value.tolist() for value in result.components.values()), strict=True)
+    time_limit = (result.truncated & ~result.terminated).tolist()
+    per_robot = (result.rate_bps, result.sinr_db, result.outage, result.power_w, result.gain_db, result.decoding_order)
+    return [
+        {
+            "reward_components": dict(zip(names, values, strict=True)),
+            "rate_bps": rate,
+            "sinr_db": sinr,
+            "outage": outage,
+            "power_w": power,
+            "gain_db": gain,
+            "decoding_order": order,
+            "TimeLimit.truncated": truncated,
+        }
+        for values, truncated, rate, sinr, outage, power, gain, order in zip(components, time_limit, *per_robot, strict=True)
+    ]
 
 
 def make_mission_vec_env(

@@ -261,3 +261,37 @@ def test_occupancy_follows_snapping(data):
     # hanging boxes (z_bottom >= body) never block on their own
     if len(blocking) == 0:
         assert not blocked.any()
+
+
+finite_floats = st.floats(allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=2000, deadline=None)
+@given(dx=finite_floats, dy=finite_floats)
+def test_compiled_hypot_gives_the_bits_of_math_hypot(dx, dy):
+    assert G.hypot(dx, dy) == math.hypot(dx, dy)
+
+
+@settings(max_examples=300, deadline=None)
+@given(scale=st.sampled_from([1e-310, 1e-3, 1.0, 55.0, 1e300]), seed=st.integers(0, 2**32 - 1))
+def test_distance_gives_the_bits_of_math_hypot(scale, seed):
+    # Random magnitudes (subnormal ones included) and near-equal points, where libm's hypot differs most often
+    rng = np.random.default_rng(seed)
+    a = rng.standard_normal((64, 2)) * scale
+    b = a + rng.standard_normal((64, 2)) * scale * rng.choice([1e-9, 1.0], (64, 1))
+    expected = [math.hypot(x0 - x1, y0 - y1) for (x0, y0), (x1, y1) in zip(a.tolist(), b.tolist(), strict=True)]
+    assert G.distance(a, b).tolist() == expected
+    assert G.distance(a.reshape(4, 16, 2), b.reshape(4, 16, 2)).shape == (4, 16)
+
+
+def test_hypot_edge_values_follow_math_hypot():
+    for dx, dy in [(0.0, -0.0), (3.0, 4.0), (math.inf, math.nan), (math.nan, -math.inf), (1e308, 1e308), (5e-324, 0.0)]:
+        assert G.hypot(dx, dy) == math.hypot(dx, dy)
+    assert math.isnan(G.hypot(math.nan, 1.0))
+
+
+def test_point_cell_and_flat_cell_clip_to_the_grid():
+    points = np.array([[-0.1, 0.2], [0.49, 0.51], [5.0, 2.99], [100.0, -3.0]])
+    ix, iy = G.point_cell(points, 0.5, (10, 6))
+    assert ix.tolist() == [0, 0, 9, 9] and iy.tolist() == [0, 1, 5, 0]
+    assert G.flat_cell(points.reshape(2, 2, 2), 0.5, (10, 6)).tolist() == [[0, 1], [59, 54]]

@@ -148,7 +148,7 @@ def test_collision_free_fast_path_changes_nothing(blocked, actions, max_step):
     assume(len(free) > 0)
     fast = _motion(blocked, max_step=max_step, arrival_radius=0.4)
     slow = _motion(blocked, max_step=max_step, arrival_radius=0.4)
-    slow._box_clear = lambda *args: False  # always take the sub-step collision tests
+    slow._fast_path = False  # always take the sub-step collision tests
     pos = fast_pos = (free[[0, -1]] + 0.5) * RES
     goals = (free[[-1, 0]] + 0.5) * RES
     for action in actions:
@@ -156,3 +156,23 @@ def test_collision_free_fast_path_changes_nothing(blocked, actions, max_step):
         pos, arrived = slow.move(pos, action, goals)
         np.testing.assert_array_equal(fast_pos, pos)
         np.testing.assert_array_equal(fast_arrived, arrived)
+
+
+def test_move_refuses_mismatched_shapes_and_positions_that_are_not_free():
+    blocked = np.zeros((8, 6), dtype=bool)
+    blocked[3, 2] = True
+    motion = _motion(blocked)
+    with pytest.raises(
+        ValueError,
+        match=r"must be points \(..., 2\); actions \(1, 2\) and destinations \(2, 2\) must have their shape",
+    ):
+        motion.move_batch(np.ones((2, 2)), np.zeros((1, 2)), np.ones((2, 2)), np.ones(2, dtype=bool))
+    with pytest.raises(ValueError, match=r"active \(3,\)"):
+        motion.move(np.ones((2, 2)), np.zeros((2, 2)), active=np.ones(3, dtype=bool))
+    blocked_point = [3.5 * RES, 2.5 * RES]
+    with pytest.raises(ValueError, match=r"positions\[1, 0\]: \[1.75, 1.25\] is outside the room or in a blocked cell"):
+        motion.move_batch(
+            np.array([[[1.0, 1.0]], [blocked_point]]), np.zeros((2, 1, 2)), np.ones((2, 1, 2)), np.ones((2, 1), bool)
+        )
+    with pytest.raises(ValueError, match=r"positions\[0\]: \[-0.1, 1.0\]"):
+        motion.move(np.array([[-0.1, 1.0]]), np.zeros((1, 2)))

@@ -1,7 +1,7 @@
 """NOMA and OMA downlink of one AP cluster (paper Sec. II-C, Eq. (8)-(13); docs/MODEL.md).
 
-Pure, vectorised numpy functions on linear quantities (watts, linear power gains), broadcasting over
-any leading batch dimensions: the last axis is the robot axis (length U), so one mission ``(U,)`` and a
+Pure functions on linear quantities (watts, linear power gains), broadcasting over any leading batch
+dimensions (numpy; the power and SIC loops over robots compiled with numba): the last axis is the robot axis (length U), so one mission ``(U,)`` and a
 batch of N missions ``(N, U)`` go through the same code. They are shared by the environment, the
 planners and the tests. Sums over robots run in a fixed order (left to right, or down the decoding
 order), so a batch gives the same bits as its missions one by one.
@@ -14,9 +14,10 @@ power spectral density and ``p_u`` the transmit power the AP allocates to robot 
 
 from typing import Any, Literal, NamedTuple
 
+import numba
 import numpy as np
 
-from noma_radiomap.propagation import linear_to_db, sequential_sum
+from noma_radiomap.propagation import linear_to_db
 
 MultipleAccess = Literal["noma", "oma"]
 MULTIPLE_ACCESS: tuple[str, ...] = ("noma", "oma")
@@ -50,12 +51,24 @@ def allocate_power(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
     :param max_power_w: ``P_max`` in watts
     :return: allocated powers in watts, shape (..., U), summing to at most ``P_max``
     """
-    # np.minimum/np.maximum rather than np.clip: the env calls this every step on tiny arrays.
-    power = (0.5 * max_power_w) * (np.minimum(np.maximum(power_actions, -1.0), 1.0) + 1.0)
-    total = sequential_sum(power)[..., None]
-    return power * np.minimum(1.0, max_power_w / np.maximum(total, _TINY))
+    actions = np.asarray(power_actions, dtype=np.float64)
+    return _allocate_rows(actions.reshape(-1, actions.shape[-1]), float(max_power_w)).reshape(actions.shape)
 
 
+@numba.njit(cache=True)
+def _allocate_rows(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
+    """:func:`allocate_power` on (M, U) actions, compiled; each row's powers summed left to right."""
+    power = np.empty(power_actions.shape)
+    for row in range(power_actions.shape[0]):
+        total = 0.0
+        for u in range(power_actions.shape[1]):
+            power[row, u] = (0.5 * max_power_w) * (min(max(power_actions[row, u], -1.0), 1.0) + 1.0)
+            total += power[row, u]
+        power[row] *= min(1.0, max_power_w / max(total, _TINY))
+    return power
+
+
+@numba.njit(cache=True)
 def equivalent_gain(gain: np.ndarray, interference_w: np.ndarray, noise_w: float | np.ndarray) -> np.ndarray:
     """
     Equivalent channel gain ``G_u = g_u / (I_u + N0 W)`` (paper Eq. (8)), the SIC ordering criterion.
@@ -79,10 +92,11 @@ def decoding_order(equivalent_gains: np.ndarray) -> np.ndarray:
     return np.argsort(equivalent_gains, axis=-1, kind="stable")
 
 
+@numba.njit(cache=True)
 def sic_sinr(power_w: Any, gain: Any, stronger_power_w: Any, interference_w: Any, noise_w: Any) -> Any:
     """
     NOMA SINR after SIC given the power of the robots stronger than u (paper Eq. (11)):
-    ``p_u g_u / (g_u P_stronger + I_u + N0 W)``. Operators only, so it takes arrays or Python floats alike.
+    ``p_u g_u / (g_u P_stronger + I_u + N0 W)``. Compiled, on floats (the SIC loops) or arrays.
     """
     return power_w * gain / (gain * stronger_power_w + interference_w + noise_w)
 
@@ -99,7 +113,7 @@ def noma_sinr(
     power_w: np.ndarray,
     gain: np.ndarray,
     interference_w: np.ndarray,
-    noise_w: float | np.ndarray,
+    noise_w: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """
     Downlink NOMA SINR with SIC (paper Eq. (10)-(11) with the signal powers squared out).
@@ -114,24 +128,33 @@ def noma_sinr(
     :param noise_w: noise power over the cluster band, ``N0 W`` in watts
     :return: linear SINRs (..., U) and the decoding order (..., U), weakest first
     """
-    power_w, gain, interference_w = np.asarray(power_w), np.asarray(gain), np.asarray(interference_w)
-    order = decoding_order(equivalent_gain(gain, interference_w, noise_w))
-    # The power of the robots decoded after u, summed from the strongest down (an exclusive cumulative sum
-    # over the reversed decoding order), then scattered back to robot order. One mission indexes directly
-    # (the env's per-step path); a batch gathers along the robot axis.
-    from_strongest_order = order[..., ::-1]
-    if power_w.ndim == 1:
-        from_strongest = power_w[from_strongest_order]
-    else:
-        from_strongest = np.take_along_axis(power_w, from_strongest_order, axis=-1)
-    stronger_sorted = np.zeros_like(from_strongest)
-    np.cumsum(from_strongest[..., :-1], axis=-1, out=stronger_sorted[..., 1:])
-    stronger = np.empty_like(stronger_sorted)
-    if power_w.ndim == 1:
-        stronger[from_strongest_order] = stronger_sorted
-    else:
-        np.put_along_axis(stronger, from_strongest_order, stronger_sorted, axis=-1)
-    return sic_sinr(power_w, gain, stronger, interference_w, noise_w), order
+    power_w, gain, interference_w = (np.asarray(value, dtype=np.float64) for value in (power_w, gain, interference_w))
+    shape = power_w.shape
+    if gain.shape != shape or interference_w.shape != shape:
+        shape = np.broadcast_shapes(shape, gain.shape, interference_w.shape)
+        power_w, gain, interference_w = (np.broadcast_to(value, shape) for value in (power_w, gain, interference_w))
+    rows = (-1, shape[-1])
+    sinr, order = _sic_rows(power_w.reshape(rows), gain.reshape(rows), interference_w.reshape(rows), float(noise_w))
+    return sinr.reshape(shape), order.reshape(shape)
+
+
+@numba.njit(cache=True)
+def _sic_rows(
+    power_w: np.ndarray, gain: np.ndarray, interference_w: np.ndarray, noise_w: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`noma_sinr` of (M, U) robots, compiled: per row the decoding order (:func:`decoding_order`: a
+    stable sort), then the SINRs from the strongest robot down, the power of the stronger ones summed on the way."""
+    sinr = np.empty(power_w.shape)
+    order = np.empty(power_w.shape, dtype=np.int64)
+    for row in range(power_w.shape[0]):
+        row_order = np.argsort(equivalent_gain(gain[row], interference_w[row], noise_w), kind="mergesort")
+        order[row] = row_order
+        stronger = 0.0
+        for k in range(power_w.shape[1] - 1, -1, -1):
+            u = row_order[k]
+            sinr[row, u] = sic_sinr(power_w[row, u], gain[row, u], stronger, interference_w[row, u], noise_w)
+            stronger += power_w[row, u]
+    return sinr, order
 
 
 def oma_sinr(
@@ -235,9 +258,11 @@ def single_transmission(
     :return: the allocated powers (U,) and the :class:`DownlinkResult`
     """
     n_robots = len(power_actions)
-    # allocate_power() on floats: Python's sum adds left to right, like sequential_sum
+    # allocate_power() on floats, summed left to right (Python 3.12's sum() compensates its rounding)
     power = [(0.5 * max_power_w) * (min(max(a, -1.0), 1.0) + 1.0) for a in power_actions]
-    total = sum(power)
+    total = 0.0
+    for p in power:
+        total += p
     if total > max_power_w:
         power = [p * (max_power_w / total) for p in power]
     cluster_band_hz = n_robots * bandwidth_per_robot_hz

@@ -349,7 +349,7 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def _channel(self) -> tuple[np.ndarray, np.ndarray]:
         """Channel at the robots' positions: the linear AP gain and the interference power (U,) each."""
-        cells = [self.scenario.room.point_flat_cell(x, y) for x, y in self.positions.tolist()]
+        cells = self.scenario.room.flat_cell_index(self.positions)
         gains = self._gain_table[cells]  # (U, transmitters)
         if self.channel == "rayleigh":
             gains = faded_gain(gains, rayleigh_fading(self.np_random, gains.shape))

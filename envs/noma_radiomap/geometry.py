@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse import csgraph
@@ -138,35 +139,127 @@ def free_components(blocked: np.ndarray) -> np.ndarray:
 
 def point_cell(xy: np.ndarray, resolution: float, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """
-    Cell indices of points, clipped to the grid.
+    Cell indices of points, clipped to the grid: ``ix = floor(x / res)``, ``iy = floor(y / res)``.
 
     :param xy: (..., 2) positions in metres
     :param resolution: cell size (m)
     :param shape: grid shape ``(nx, ny)``
     :return: ``(ix, iy)`` int arrays of shape (...)
     """
-    # Both axes in one pass, np.minimum / np.maximum rather than np.clip: the env calls this every step on a
-    # few points, where the number of numpy calls is the cost.
-    cells = np.minimum(np.maximum(np.floor(np.asarray(xy, dtype=np.float64) / resolution), 0.0), (shape[0] - 1, shape[1] - 1))
-    cells = cells.astype(np.int64)
+    xy = np.asarray(xy, dtype=np.float64)
+    cells = _cells(xy.reshape(-1, 2), float(resolution), shape[0], shape[1], False).reshape(*xy.shape[:-1], 2)
     return cells[..., 0], cells[..., 1]
+
+
+def flat_cell(xy: np.ndarray, resolution: float, shape: tuple[int, int]) -> np.ndarray:
+    """
+    Flat cell indices ``ix * ny + iy`` of points (:func:`point_cell`): rows of per-cell tables.
+
+    :param xy: (..., 2) positions in metres
+    :param resolution: cell size (m)
+    :param shape: grid shape ``(nx, ny)``
+    :return: int array of shape (...)
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    return _cells(xy.reshape(-1, 2), float(resolution), shape[0], shape[1], True).reshape(xy.shape[:-1])
+
+
+@numba.njit(cache=True)
+def _cells(xy: np.ndarray, resolution: float, nx: int, ny: int, flat: bool) -> np.ndarray:
+    """The cells of (M, 2) points, compiled: (M, 2) ``[ix, iy]``, or (M,) flat indices when ``flat``."""
+    cells = np.empty((len(xy), 1 if flat else 2), dtype=np.int64)
+    for row in range(len(xy)):
+        ix = min(max(math.floor(xy[row, 0] / resolution), 0), nx - 1)
+        iy = min(max(math.floor(xy[row, 1] / resolution), 0), ny - 1)
+        if flat:
+            cells[row, 0] = ix * ny + iy
+        else:
+            cells[row, 0], cells[row, 1] = ix, iy
+    return cells
 
 
 def distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     Euclidean distance between points, ``sqrt((x_a - x_b)^2 + (y_a - y_b)^2)``.
 
-    Computed with :func:`math.hypot` (correctly rounded) rather than ``np.hypot`` (the platform's libm,
-    which differs in the last bit on about 0.6 % of inputs), so results do not depend on the platform.
+    Computed with :func:`hypot` (the bits of Python's :func:`math.hypot`) rather than ``np.hypot`` (the
+    platform's libm, which differs in the last bit on about 0.6 % of inputs), so results do not depend on the
+    platform.
 
     :param a: points in metres, shape (..., 2)
     :param b: points in metres, broadcastable to ``a``
     :return: distances in metres, shape (...)
     """
     delta = np.subtract(a, b, dtype=np.float64)
-    return np.array([math.hypot(dx, dy) for dx, dy in delta.reshape(-1, 2).tolist()], dtype=np.float64).reshape(
-        delta.shape[:-1]
-    )
+    return _norms(delta.reshape(-1, 2)).reshape(delta.shape[:-1])
+
+
+@numba.njit(cache=True)
+def _norms(delta: np.ndarray) -> np.ndarray:
+    """:func:`hypot` of each row of a (M, 2) array."""
+    out = np.empty(len(delta))
+    for row in range(len(delta)):
+        out[row] = hypot(delta[row, 0], delta[row, 1])
+    return out
+
+
+@numba.njit(cache=True)
+def _exact_product(a: float, b: float) -> tuple[float, float]:
+    """``a * b`` rounded and its rounding error, exactly (Dekker's product, no fused multiply-add)."""
+    product = a * b
+    split = 134217729.0 * a  # 2**27 + 1: a = a_high + a_low with 26-bit halves
+    a_high = split - (split - a)
+    a_low = a - a_high
+    split = 134217729.0 * b
+    b_high = split - (split - b)
+    b_low = b - b_high
+    return product, ((a_high * b_high - product) + a_high * b_low + a_low * b_high) + a_low * b_low
+
+
+@numba.njit(cache=True)
+def hypot(dx: float, dy: float) -> float:
+    """
+    ``sqrt(dx^2 + dy^2)``, compiled (numba), with the algorithm of CPython's :func:`math.hypot` (3.10 and
+    later: squares and sums carried exactly in two floats, one correction of the square root). It returns the
+    bits of :func:`math.hypot` (subnormal inputs included) on every platform, unlike the platform's libm
+    ``hypot`` (a property test checks the equality).
+
+    :param dx: a coordinate difference
+    :param dy: the other one
+    :return: the Euclidean norm
+    """
+    x, y = abs(dx), abs(dy)
+    largest = 0.0  # the largest of the two, a NaN left out (an infinity wins over a NaN, as in math.hypot)
+    if x > largest:
+        largest = x
+    if y > largest:
+        largest = y
+    if math.isinf(largest):
+        return largest
+    if math.isnan(x) or math.isnan(y):
+        return math.nan
+    if largest == 0.0:
+        return largest
+    _, exponent = math.frexp(largest)
+    if exponent < -1023:  # subnormal: 2**-exponent would overflow; divide by the largest instead
+        x, y = x / largest, y / largest
+        return largest * math.sqrt(x * x + y * y)
+    scale = math.ldexp(1.0, -exponent)
+    total, low_products, low_sums = 1.0, 0.0, 0.0
+    for value in (x * scale, y * scale):
+        square, square_error = _exact_product(value, value)
+        high = total + square
+        low_sums += (total - high) + square
+        total = high
+        low_products += square_error
+    root = math.sqrt(total - 1.0 + (low_products + low_sums))
+    square, square_error = _exact_product(-root, root)
+    high = total + square
+    low_sums += (total - high) + square
+    total = high
+    low_products += square_error
+    root += (total - 1.0 + (low_products + low_sums)) / (2.0 * root)
+    return root / scale
 
 
 def region_cells(region: tuple[float, float, float, float], resolution: float, shape: tuple[int, int]) -> np.ndarray:

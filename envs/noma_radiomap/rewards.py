@@ -1,9 +1,8 @@
 """The reward of the mission env and the mission quality indicator (paper Sec. II-D and IV-E; docs/MODEL.md).
 
-Pure numpy functions whose leading axes are free: per-robot arrays have shape (..., U), so one mission
-``(U,)`` and a batch of N missions ``(N, U)`` go through the same code. Sums over robots run left to
-right (:func:`~noma_radiomap.propagation.sequential_sum`), so a batch gives the same bits as its missions
-one by one.
+Functions whose leading axes are free: per-robot arrays have shape (..., U), so one mission ``(U,)`` and a
+batch of N missions ``(N, U)`` go through the same code (the components in one compiled loop, numba). Sums
+over robots run left to right, so a batch gives the same bits as its missions one by one.
 
 The reward is a weighted sum of named components, each summed over the robots that had not arrived
 before the step: ``time`` (``R_c``), ``inducing`` (``R_i``), ``qos`` (``R_QoS``), ``arrival`` (``R_d``)
@@ -13,9 +12,8 @@ and ``success`` (``R_s``). A reward phase picks the components (weights 0 or 1, 
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-
-from noma_radiomap.propagation import sequential_sum
 
 #: The reward phases: the paper's destination training (Eq. (26)), its MQI training (Eq. (27)) and all five
 #: components at once (the plain DDPG baseline).
@@ -60,15 +58,16 @@ def phase_weights(phase: str) -> dict[str, float]:
     return {name: float(name in terms) for name in REWARD_COMPONENTS}
 
 
-def inducing_reward(distance: np.ndarray, d_max: float) -> np.ndarray:
+@numba.njit(cache=True)
+def inducing_reward(distance: np.ndarray | float, d_max: float) -> np.ndarray | float:
     """
     Inducing reward ``R_i = 1 - d / d_max`` (paper Sec. IV-E, destination training).
 
-    :param distance: distances ``d`` of the robots to their destinations in metres, shape (..., U)
+    :param distance: distances ``d`` of the robots to their destinations in metres, an array (..., U) or a float
     :param d_max: the largest possible distance (the room's diagonal, :attr:`Room.d_max`)
-    :return: ``R_i``, shape (..., U)
+    :return: ``R_i``, the shape of ``distance``
     """
-    return 1.0 - np.asarray(distance) / d_max
+    return 1.0 - distance / d_max
 
 
 def reward_components(
@@ -93,18 +92,53 @@ def reward_components(
     :param constants: the reward constants
     :return: ``{component: value}`` for each of :data:`REWARD_COMPONENTS`, arrays of shape (...)
     """
-    active, arriving, outage = np.asarray(active, dtype=bool), np.asarray(arriving, dtype=bool), np.asarray(outage, dtype=bool)
-    n_active, n_arriving = active.sum(axis=-1), arriving.sum(axis=-1)
-    n_outage = (outage & active).sum(axis=-1)
-    # Everyone has arrived: the active robots of this step are exactly the arriving ones.
-    all_arrived = (arriving | ~active).all(axis=-1)
-    return {
-        "time": constants.time_cost * n_active + 0.0,  # + 0.0: no -0.0 when every robot has arrived
-        "inducing": sequential_sum(np.where(active, inducing_reward(distance, d_max), 0.0)),
-        "qos": 0.0 - constants.outage_penalty * n_outage,
-        "arrival": constants.arrival_reward * n_arriving,
-        "success": np.where(all_arrived & (n_arriving > 0), constants.success_reward, 0.0),
-    }
+    active = np.asarray(active, dtype=bool)
+    shape, n_robots = active.shape[:-1], active.shape[-1]
+    values = _component_values(
+        active.reshape(-1, n_robots),
+        np.asarray(arriving, dtype=bool).reshape(-1, n_robots),
+        np.asarray(outage, dtype=bool).reshape(-1, n_robots),
+        np.asarray(distance, dtype=np.float64).reshape(-1, n_robots),
+        float(d_max),
+        float(constants.time_cost),
+        float(constants.outage_penalty),
+        float(constants.arrival_reward),
+        float(constants.success_reward),
+    )
+    return dict(zip(REWARD_COMPONENTS, values.reshape(len(REWARD_COMPONENTS), *shape), strict=True))
+
+
+@numba.njit(cache=True)
+def _component_values(
+    active: np.ndarray,
+    arriving: np.ndarray,
+    outage: np.ndarray,
+    distance: np.ndarray,
+    d_max: float,
+    time_cost: float,
+    outage_penalty: float,
+    arrival_reward: float,
+    success_reward: float,
+) -> np.ndarray:
+    """:func:`reward_components` of (M, U) robots, compiled: the components in the rows of a (5, M) array
+    (the order of :data:`REWARD_COMPONENTS`), the inducing terms summed left to right."""
+    values = np.empty((5, active.shape[0]))
+    for row in range(active.shape[0]):
+        n_active, n_arriving, n_outage, inducing, all_arrived = 0, 0, 0, 0.0, True
+        for u in range(active.shape[1]):
+            if active[row, u]:
+                n_active += 1
+                n_outage += outage[row, u]
+                inducing += inducing_reward(distance[row, u], d_max)
+            n_arriving += arriving[row, u]
+            # Everyone has arrived: the active robots of this step are exactly the arriving ones.
+            all_arrived &= arriving[row, u] or not active[row, u]
+        values[0, row] = time_cost * n_active + 0.0  # + 0.0: no -0.0 when every robot has arrived
+        values[1, row] = inducing
+        values[2, row] = 0.0 - outage_penalty * n_outage
+        values[3, row] = arrival_reward * n_arriving
+        values[4, row] = success_reward if all_arrived and n_arriving > 0 else 0.0
+    return values
 
 
 def weighted_reward(components: Mapping[str, np.ndarray], weights: Mapping[str, float]) -> np.ndarray:

@@ -90,8 +90,7 @@ class Room:
 
     The room owns the map from points to cells: cell ``(ix, iy)`` spans
     ``[ix res, (ix + 1) res) x [iy res, (iy + 1) res)`` and grids are indexed ``[ix, iy]`` (flat index
-    ``ix * ny + iy``). The batched methods take points of shape ``(..., 2)``; :meth:`point_cell` is their
-    scalar fast path for one point (the motion model's sub-steps), tested equal to :meth:`cell_index`.
+    ``ix * ny + iy``). The methods take points of shape ``(..., 2)``.
     """
 
     width: float
@@ -134,31 +133,7 @@ class Room:
         :param xy: points in metres, shape (..., 2)
         :return: int array of shape (...)
         """
-        ix, iy = self.cell_index(xy)
-        return ix * self.ny + iy
-
-    def point_cell(self, x: float, y: float) -> tuple[int, int]:
-        """
-        The cell of one point of the room (``x, y >= 0``) on Python floats: :meth:`cell_index` without numpy.
-
-        :param x: x in metres
-        :param y: y in metres
-        :return: ``(ix, iy)``
-        """
-        nx, ny = self.shape
-        return min(int(x / self.resolution), nx - 1), min(int(y / self.resolution), ny - 1)
-
-    def point_flat_cell(self, x: float, y: float) -> int:
-        """
-        The flat cell index ``ix * ny + iy`` of one point of the room on Python floats: :meth:`flat_cell_index`
-        without numpy (the single env's per-step lookup).
-
-        :param x: x in metres
-        :param y: y in metres
-        :return: the flat index
-        """
-        ix, iy = self.point_cell(x, y)
-        return ix * self.ny + iy
+        return geometry.flat_cell(xy, self.resolution, self.shape)
 
     def cell_center(self, ix: np.ndarray | int, iy: np.ndarray | int) -> np.ndarray:
         """

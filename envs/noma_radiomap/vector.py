@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
+import numba
 import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -40,25 +41,6 @@ class BatchStep:
     decoding_order: np.ndarray
     outage: np.ndarray
     gain_db: np.ndarray
-
-    def infos(self) -> list[dict[str, Any]]:
-        """The single env's ``info`` of each stepped mission (without the episode summary), in row order."""
-        names = list(self.components)
-        values = zip(*(value.tolist() for value in self.components.values()), strict=True)
-        arrays = (self.rate_bps, self.sinr_db, self.outage, self.power_w, self.gain_db, self.decoding_order)
-        per_row = zip(values, *arrays, strict=True)
-        return [
-            {
-                "reward_components": dict(zip(names, components, strict=True)),
-                "rate_bps": rate,
-                "sinr_db": sinr,
-                "outage": outage,
-                "power_w": power,
-                "gain_db": gain,
-                "decoding_order": order,
-            }
-            for components, rate, sinr, outage, power, gain, order in per_row
-        ]
 
 
 class MissionView:
@@ -197,6 +179,7 @@ class NomaRadioMapVecEnv(VectorEnv):
         self._gain_db = np.zeros((n, u))
         self._distance_maps = np.zeros((n, u, 0))
         self._autoreset = np.zeros(n, dtype=bool)
+        self._all_rows = np.arange(n)
 
     # --- reward phases and per-mission access -----------------------------------------------------
     def set_reward_phase(self, name: str, indices: Any = None) -> None:
@@ -286,9 +269,7 @@ class NomaRadioMapVecEnv(VectorEnv):
         active = ~self.arrived[rows]
         positions, at_goal = env._motion.move_batch(self.positions[rows], action[..., :2], self.destinations[rows], active)
         self.positions[rows] = positions
-        self.arrived[rows] |= at_goal
         arriving = at_goal & active
-        self.step_counts[rows] += 1
         gain, interference = self._channel(rows)
         radio = env.scenario.radio
         power = allocate_power(np.where(active, action[..., 2], -1.0), env._max_power_w)
@@ -297,20 +278,24 @@ class NomaRadioMapVecEnv(VectorEnv):
         components = rewards.reward_components(
             active, arriving, outage, self._distances(rows), env._d_max, env._reward_constants
         )
-        weights = self._weights[rows]
         # A weight per row (the phase may differ between missions), summed as the single env sums its floats
-        reward = rewards.weighted_reward(components, {k: weights[:, j] for j, k in enumerate(self.REWARD_COMPONENTS)})
-        self._outage_steps[rows] += outage
-        step_counts = self.step_counts[rows]
-        arrival_step = self._arrival_step[rows]
-        arrival_step[arriving] = np.broadcast_to(step_counts[:, None], arriving.shape)[arriving]
-        self._arrival_step[rows] = arrival_step
-        terminated = self.arrived[rows].all(axis=-1)
+        reward = rewards.weighted_reward(components, self._weight_columns(rows))
+        row_indices = self._all_rows[rows]
+        terminated, truncated = _record_step(
+            row_indices,
+            arriving,
+            outage,
+            self.arrived,
+            self.step_counts,
+            self._arrival_step,
+            self._outage_steps,
+            self.max_episode_steps,
+        )
         return BatchStep(
-            rows=np.arange(self.num_envs)[rows],
+            rows=row_indices,
             reward=reward,
             terminated=terminated,
-            truncated=step_counts >= self.max_episode_steps,
+            truncated=truncated,
             components=components,
             power_w=power,
             rate_bps=result.rate_bps,
@@ -330,6 +315,10 @@ class NomaRadioMapVecEnv(VectorEnv):
         gain = gains[..., 0]
         self._gain_db[rows] = linear_to_db(gain)
         return gain, interference_power(gains[..., 1:], env._interferer_power_w)
+
+    def _weight_columns(self, rows: np.ndarray | slice) -> dict[str, np.ndarray]:
+        """The weight of each reward component for the stepped rows."""
+        return dict(zip(self.REWARD_COMPONENTS, self._weights[rows].T, strict=True))
 
     def _distances(self, rows: np.ndarray | slice) -> np.ndarray:
         env = self.template
@@ -434,6 +423,40 @@ class NomaRadioMapVecEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         self.template.close()
+
+
+@numba.njit(cache=True)
+def _record_step(
+    rows: np.ndarray,
+    arriving: np.ndarray,
+    outage: np.ndarray,
+    arrived: np.ndarray,
+    step_counts: np.ndarray,
+    arrival_step: np.ndarray,
+    outage_steps: np.ndarray,
+    max_episode_steps: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """
+    The bookkeeping of a step of the missions ``rows`` (the single env's, in one compiled loop): count the
+    step, record the arrivals (``arriving``, (rows, U)) and their step, add the outages; in place on the
+    (N, ...) state arrays. Returns whether each stepped mission terminated (all robots arrived) and
+    reached ``max_episode_steps``.
+    """
+    terminated = np.empty(len(rows), dtype=np.bool_)
+    truncated = np.empty(len(rows), dtype=np.bool_)
+    for k in range(len(rows)):
+        i = rows[k]
+        step_counts[i] += 1
+        all_arrived = True
+        for u in range(arrived.shape[1]):
+            if arriving[k, u]:
+                arrived[i, u] = True
+                arrival_step[i, u] = step_counts[i]
+            outage_steps[i, u] += outage[k, u]
+            all_arrived &= arrived[i, u]
+        terminated[k] = all_arrived
+        truncated[k] = step_counts[i] >= max_episode_steps
+    return terminated, truncated
 
 
 def make_vec_env(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
