@@ -613,14 +613,17 @@ def run_one(
     if checkpoint_every:
         callbacks.append(PeriodicCheckpoint(run_dir, checkpoint_every, identity, start=done_episodes))
     start = time.perf_counter()
-    if total_timesteps > 0:
-        model.learn(
-            total_timesteps=total_timesteps,
-            callback=callbacks,
-            log_interval=1,
-            reset_num_timesteps=checkpoint is None,
-            progress_bar=progress_bar,
-        )
+    try:
+        if total_timesteps > 0:
+            model.learn(
+                total_timesteps=total_timesteps,
+                callback=callbacks,
+                log_interval=1,
+                reset_num_timesteps=checkpoint is None,
+                progress_bar=progress_bar,
+            )
+    finally:
+        model.logger.close()  # flush and close the CSV and TensorBoard files, also on an interruption
     train_s = time.perf_counter() - start
     atomic_write(run_dir / "model.zip", model.save)
     curriculum = getattr(model, "curriculum_state", None)
