@@ -1,10 +1,10 @@
 """NOMA and OMA downlink of one AP cluster (paper Sec. II-C, Eq. (8)-(13); docs/MODEL.md).
 
 Pure functions on linear quantities (watts, linear power gains), broadcasting over any leading batch
-dimensions (numpy; the power and SIC loops over robots compiled with numba): the last axis is the robot axis (length U), so one mission ``(U,)`` and a
-batch of N missions ``(N, U)`` go through the same code. They are shared by the environment, the
-planners and the tests. Sums over robots run in a fixed order (left to right, or down the decoding
-order), so a batch gives the same bits as its missions one by one.
+dimensions (numpy; the power and SIC loops over robots compiled with numba): the last axis is the robot axis
+(length U), so one mission ``(U,)`` and a batch of N missions ``(N, U)`` go through the same code. They are
+shared by the environment, the planners and the tests. Sums over robots run in a fixed order (left to right,
+or down the decoding order), so a batch gives the same bits as its missions one by one.
 
 Notation: ``g_u`` is robot u's channel power gain from the AP (path loss and small-scale fading,
 linear), ``I_u`` the interference power it receives from the external interferers over the whole
