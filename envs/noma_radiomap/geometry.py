@@ -165,12 +165,26 @@ def flat_cell(xy: np.ndarray, resolution: float, shape: tuple[int, int]) -> np.n
 
 
 @numba.njit(cache=True)
+def axis_cell(coordinate: float, resolution: float, n_cells: int) -> int:
+    """
+    The cell index of a coordinate along one axis, ``floor(coordinate / resolution)`` clipped to
+    ``[0, n_cells - 1]`` (compiled; :func:`point_cell` and the motion kernel use it).
+
+    :param coordinate: x or y in metres
+    :param resolution: cell size (m)
+    :param n_cells: the grid's number of cells along that axis
+    :return: the index
+    """
+    return min(max(math.floor(coordinate / resolution), 0), n_cells - 1)
+
+
+@numba.njit(cache=True)
 def _cells(xy: np.ndarray, resolution: float, nx: int, ny: int, flat: bool) -> np.ndarray:
     """The cells of (M, 2) points, compiled: (M, 2) ``[ix, iy]``, or (M,) flat indices when ``flat``."""
     cells = np.empty((len(xy), 1 if flat else 2), dtype=np.int64)
     for row in range(len(xy)):
-        ix = min(max(math.floor(xy[row, 0] / resolution), 0), nx - 1)
-        iy = min(max(math.floor(xy[row, 1] / resolution), 0), ny - 1)
+        ix = axis_cell(xy[row, 0], resolution, nx)
+        iy = axis_cell(xy[row, 1], resolution, ny)
         if flat:
             cells[row, 0] = ix * ny + iy
         else:

@@ -197,7 +197,7 @@ def _move_robots(
         x, y = positions[row, 0], positions[row, 1]
         if not (0.0 <= x < width and 0.0 <= y < depth):
             return positions, arrived, row
-        ix, iy = min(int(x / resolution), nx - 1), min(int(y / resolution), ny - 1)
+        ix, iy = geometry.axis_cell(x, resolution, nx), geometry.axis_cell(y, resolution, ny)
         if blocked[ix, iy]:
             return positions, arrived, row
     for row in range(len(positions)):
@@ -209,15 +209,16 @@ def _move_robots(
             norm = geometry.hypot(dx, dy)
             scale = max_step / norm / n_substeps if norm > max_step else 1.0 / n_substeps
             sx, sy = dx * scale, dy * scale
-            ix, iy = min(int(x / resolution), nx - 1), min(int(y / resolution), ny - 1)
+            ix, iy = geometry.axis_cell(x, resolution, nx), geometry.axis_cell(y, resolution, ny)
             # Fast path: no blocked cell and no wall in the box around the whole move -> no collision test.
             end_x, end_y = x + n_substeps * sx, y + n_substeps * sy
             low_x, high_x = min(x, end_x) - margin, max(x, end_x) + margin
             low_y, high_y = min(y, end_y) - margin, max(y, end_y) + margin
             clear = False
             if fast_path and low_x >= 0.0 and low_y >= 0.0 and high_x < width and high_y < depth:
-                ix0, iy0 = min(int(low_x / resolution), nx - 1), min(int(low_y / resolution), ny - 1)
-                ix1, iy1 = min(int(high_x / resolution), nx - 1) + 1, min(int(high_y / resolution), ny - 1) + 1
+                ix0, iy0 = geometry.axis_cell(low_x, resolution, nx), geometry.axis_cell(low_y, resolution, ny)
+                ix1 = geometry.axis_cell(high_x, resolution, nx) + 1
+                iy1 = geometry.axis_cell(high_y, resolution, ny) + 1
                 clear = table[ix1, iy1] - table[ix0, iy1] - table[ix1, iy0] + table[ix0, iy0] == 0
             for _ in range(n_substeps):
                 if has_goals and (x - gx) * (x - gx) + (y - gy) * (y - gy) <= radius_sq:
@@ -227,8 +228,8 @@ def _move_robots(
                     x, y = tx, ty
                     continue
                 inside_x, inside_y = 0.0 <= tx < width, 0.0 <= ty < depth
-                nix = min(int(tx / resolution), nx - 1) if inside_x else -1
-                niy = min(int(ty / resolution), ny - 1) if inside_y else -1
+                nix = geometry.axis_cell(tx, resolution, nx) if inside_x else -1
+                niy = geometry.axis_cell(ty, resolution, ny) if inside_y else -1
                 if inside_x and inside_y and not blocked[nix, niy]:
                     # A diagonal cell change passes near the shared corner: both side cells must be free.
                     if nix == ix or niy == iy or not (blocked[nix, iy] or blocked[ix, niy]):
