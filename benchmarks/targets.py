@@ -7,6 +7,9 @@ the final policy is tested on 20 missions with Rayleigh fading (seeds 10 000 + i
 and for the comm-aware planner, whose MQI is the yardstick). Both methods use the same shared settings
 (``--hyperparams``).
 
+``--algo-kwargs`` passes further constructor arguments to both methods (e.g. ``'{"gradient_steps": 2}'``); such a
+variant needs a ``--tag``, which names its result files and summary.
+
 ``--observation goal`` wraps every env (training and test) in
 :class:`noma_radiomap.wrappers.RelativeGoalObservation`: the goal-conditioned observation extension, reported in
 its own rows; ``paper`` is the paper's observation.
@@ -61,12 +64,13 @@ def run(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
             destination_episodes=args.destination_episodes or args.episodes,
             success_threshold=args.success_threshold or None,
         )
-    model = make_model(method, env, seed=seed, hyperparams=args.hyperparams, **extra)
+    model = make_model(method, env, seed=seed, hyperparams=args.hyperparams, **extra, **args.algo_kwargs)
     record: dict[str, Any] = {
         "method": method,
         "seed": seed,
         "observation": args.observation,
         "transfer": transfer_name(args) if method == "dtdpg" else None,
+        "algo_kwargs": args.algo_kwargs,
         "success": [],
         "mqi": [],
     }
@@ -134,7 +138,8 @@ def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argp
     lines = [
         f"Test: {args.eval_episodes} Rayleigh missions; comm-aware planner {planner['test_mqi']:.1f} MQI, "
         f"{planner['test_success']:.0%} success; {args.episodes} training episodes per run; observation "
-        f"{args.observation}; DT-DPG's transfer: {transfer_name(args) or 'early, at 95 % over 20 episodes'}.",
+        f"{args.observation}; DT-DPG's transfer: {transfer_name(args) or 'early, at 95 % over 20 episodes'}"
+        + (f"; both methods with {json.dumps(args.algo_kwargs)} ({args.tag})." if args.algo_kwargs else "."),
         "",
         f"| method | seed | phase-1 episodes{rule} | test success | test MQI | MQI / planner | train wall s |",
         "|---|---|---|---|---|---|---|",
@@ -208,16 +213,26 @@ def main() -> None:
     parser.add_argument("--hyperparams", choices=["tuned", "paper"], default="tuned", help="the shared settings")
     parser.add_argument("--env", default="NomaRadioMap-v0")
     parser.add_argument("--env-kwargs", type=json.loads, default={}, help='e.g. \'{"scenario": "small"}\'')
+    parser.add_argument(
+        "--algo-kwargs", type=json.loads, default={}, help="constructor arguments of both methods, e.g. '{\"tau\": 0.02}'"
+    )
+    parser.add_argument("--tag", default="", help="the name of an --algo-kwargs variant (in its file names)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="results/targets")
     args = parser.parse_args()
+    if not isinstance(args.algo_kwargs, dict):
+        parser.error(f"--algo-kwargs: expected a JSON object, got {args.algo_kwargs!r}")
+    if args.algo_kwargs and not args.tag:
+        parser.error(f"--algo-kwargs {json.dumps(args.algo_kwargs)}: name the variant with --tag (its result files)")
     os.makedirs(args.out, exist_ok=True)
 
     transfer = transfer_name(args)
     variant = f"_{transfer}" if transfer else ""
+    tag = f"_{args.tag}" if args.tag else ""
 
     def path(method: str, seed: int) -> str:
-        return os.path.join(args.out, f"{method}_{args.observation}{variant if method == 'dtdpg' else ''}_seed{seed}.json")
+        name = f"{method}_{args.observation}{tag}{variant if method == 'dtdpg' else ''}_seed{seed}.json"
+        return os.path.join(args.out, name)
 
     todo = [(m, s) for m in args.methods for s in args.seeds if not os.path.exists(path(m, s))]
     print(f"{len(todo)} runs to do -> {args.out}", flush=True)
@@ -247,7 +262,7 @@ def main() -> None:
                 with open(path(m, s)) as f:
                     records.append(json.load(f))
     lines = summarize(records, planner, args)
-    with open(os.path.join(args.out, f"summary_{args.observation}{variant}.md"), "w") as f:
+    with open(os.path.join(args.out, f"summary_{args.observation}{tag}{variant}.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))
 
