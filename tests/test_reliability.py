@@ -315,3 +315,25 @@ def test_curriculum_checkpoints_leave_no_temp_files_and_clean_old_ones(tmp_path)
     model = DTDPG("MlpPolicy", env, learning_starts=10, curriculum_save_path=str(tmp_path), policy_kwargs={"net_arch": [8]})
     model.learn(1)
     assert not stale.exists()
+
+
+def test_the_env_works_without_a_writable_numba_cache():
+    # No cache locator available (a read-only install and home folder): the env's loops are compiled in the
+    # process, with one warning, instead of failing at import
+    code = textwrap.dedent(
+        """
+        import warnings
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            import gymnasium as gym
+            import noma_radiomap
+            env = gym.make("NomaRadioMap-v0", scenario="small")
+            env.reset(seed=0)
+            env.step(env.action_space.sample())
+        print(sum("no writable cache folder" in str(w.message) for w in caught))
+        """
+    )
+    env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "numba.core.caching.IPythonCacheLocator"}
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "1"

@@ -14,9 +14,9 @@ power spectral density and ``p_u`` the transmit power the AP allocates to robot 
 
 from typing import Any, Literal, NamedTuple
 
-import numba
 import numpy as np
 
+from noma_radiomap.compiled import compiled
 from noma_radiomap.propagation import linear_to_db
 
 MultipleAccess = Literal["noma", "oma"]
@@ -55,7 +55,7 @@ def allocate_power(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
     return _allocate_rows(actions.reshape(-1, actions.shape[-1]), float(max_power_w)).reshape(actions.shape)
 
 
-@numba.njit(cache=True)
+@compiled
 def _allocate_rows(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
     """:func:`allocate_power` on (M, U) actions, compiled; each row's powers summed left to right."""
     power = np.empty(power_actions.shape)
@@ -68,7 +68,7 @@ def _allocate_rows(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
     return power
 
 
-@numba.njit(cache=True)
+@compiled
 def equivalent_gain(gain: np.ndarray, interference_w: np.ndarray, noise_w: float | np.ndarray) -> np.ndarray:
     """
     Equivalent channel gain ``G_u = g_u / (I_u + N0 W)`` (paper Eq. (8)), the SIC ordering criterion.
@@ -92,7 +92,7 @@ def decoding_order(equivalent_gains: np.ndarray) -> np.ndarray:
     return np.argsort(equivalent_gains, axis=-1, kind="stable")
 
 
-@numba.njit(cache=True)
+@compiled
 def sic_sinr(power_w: Any, gain: Any, stronger_power_w: Any, interference_w: Any, noise_w: Any) -> Any:
     """
     NOMA SINR after SIC given the power of the robots stronger than u (paper Eq. (11)):
@@ -138,7 +138,7 @@ def noma_sinr(
     return sinr.reshape(shape), order.reshape(shape)
 
 
-@numba.njit(cache=True)
+@compiled
 def _sic_rows(
     power_w: np.ndarray, gain: np.ndarray, interference_w: np.ndarray, noise_w: float
 ) -> tuple[np.ndarray, np.ndarray]:

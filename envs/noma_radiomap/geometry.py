@@ -21,10 +21,11 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse import csgraph
+
+from noma_radiomap.compiled import compiled
 
 #: Upper bound on the number of ray-box pairs evaluated at once (bounds memory: ~8 float64 arrays of
 #: this many elements are alive at a time, i.e. ~64 MB).
@@ -164,7 +165,7 @@ def flat_cell(xy: np.ndarray, resolution: float, shape: tuple[int, int]) -> np.n
     return _cells(xy.reshape(-1, 2), float(resolution), shape[0], shape[1], True).reshape(xy.shape[:-1])
 
 
-@numba.njit(cache=True)
+@compiled
 def axis_cell(coordinate: float, resolution: float, n_cells: int) -> int:
     """
     The cell index of a coordinate along one axis, ``floor(coordinate / resolution)`` clipped to
@@ -178,7 +179,7 @@ def axis_cell(coordinate: float, resolution: float, n_cells: int) -> int:
     return min(max(math.floor(coordinate / resolution), 0), n_cells - 1)
 
 
-@numba.njit(cache=True)
+@compiled
 def _cells(xy: np.ndarray, resolution: float, nx: int, ny: int, flat: bool) -> np.ndarray:
     """The cells of (M, 2) points, compiled: (M, 2) ``[ix, iy]``, or (M,) flat indices when ``flat``."""
     cells = np.empty((len(xy), 1 if flat else 2), dtype=np.int64)
@@ -208,7 +209,7 @@ def distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return _norms(delta.reshape(-1, 2)).reshape(delta.shape[:-1])
 
 
-@numba.njit(cache=True)
+@compiled
 def _norms(delta: np.ndarray) -> np.ndarray:
     """:func:`hypot` of each row of a (M, 2) array."""
     out = np.empty(len(delta))
@@ -217,7 +218,7 @@ def _norms(delta: np.ndarray) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True)
+@compiled
 def _exact_product(a: float, b: float) -> tuple[float, float]:
     """``a * b`` rounded and its rounding error, exactly (Dekker's product, no fused multiply-add)."""
     product = a * b
@@ -230,7 +231,7 @@ def _exact_product(a: float, b: float) -> tuple[float, float]:
     return product, ((a_high * b_high - product) + a_high * b_low + a_low * b_high) + a_low * b_low
 
 
-@numba.njit(cache=True)
+@compiled
 def hypot(dx: float, dy: float) -> float:
     """
     ``sqrt(dx^2 + dy^2)``, compiled (numba), with the algorithm of CPython's :func:`math.hypot` (3.10 and

@@ -8,10 +8,10 @@ never leaves the room nor stands in a blocked cell.
 
 import math
 
-import numba
 import numpy as np
 
 from noma_radiomap import geometry
+from noma_radiomap.compiled import compiled
 from noma_radiomap.scenario import Room
 
 _TINY = float(np.finfo(np.float64).tiny)
@@ -167,7 +167,7 @@ class GridMotion:
         return new.reshape(*shape, 2), arrived.reshape(shape)
 
 
-@numba.njit(cache=True)
+@compiled
 def _move_robots(
     positions: np.ndarray,
     actions: np.ndarray,

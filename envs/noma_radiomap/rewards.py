@@ -12,8 +12,9 @@ and ``success`` (``R_s``). A reward phase picks the components (weights 0 or 1, 
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-import numba
 import numpy as np
+
+from noma_radiomap.compiled import compiled
 
 #: The reward phases: the paper's destination training (Eq. (26)), its MQI training (Eq. (27)) and all five
 #: components at once (the plain DDPG baseline).
@@ -58,7 +59,7 @@ def phase_weights(phase: str) -> dict[str, float]:
     return {name: float(name in terms) for name in REWARD_COMPONENTS}
 
 
-@numba.njit(cache=True)
+@compiled
 def inducing_reward(distance: np.ndarray | float, d_max: float) -> np.ndarray | float:
     """
     Inducing reward ``R_i = 1 - d / d_max`` (paper Sec. IV-E, destination training).
@@ -108,7 +109,7 @@ def reward_components(
     return dict(zip(REWARD_COMPONENTS, values.reshape(len(REWARD_COMPONENTS), *shape), strict=True))
 
 
-@numba.njit(cache=True)
+@compiled
 def _component_values(
     active: np.ndarray,
     arriving: np.ndarray,

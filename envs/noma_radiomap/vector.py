@@ -12,13 +12,13 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
-import numba
 import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from noma_radiomap import geometry, rewards
+from noma_radiomap.compiled import compiled
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
 from noma_radiomap.env import NomaRadioMapEnv, mission_observation
 from noma_radiomap.propagation import faded_gain, interference_power, linear_to_db, rayleigh_fading
@@ -425,7 +425,7 @@ class NomaRadioMapVecEnv(VectorEnv):
         self.template.close()
 
 
-@numba.njit(cache=True)
+@compiled
 def _record_step(
     rows: np.ndarray,
     arriving: np.ndarray,
