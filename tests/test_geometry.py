@@ -295,3 +295,9 @@ def test_point_cell_and_flat_cell_clip_to_the_grid():
     ix, iy = G.point_cell(points, 0.5, (10, 6))
     assert ix.tolist() == [0, 0, 9, 9] and iy.tolist() == [0, 1, 5, 0]
     assert G.flat_cell(points.reshape(2, 2, 2), 0.5, (10, 6)).tolist() == [[0, 1], [59, 54]]
+
+
+def test_points_must_have_two_coordinates():
+    for call in (lambda: G.point_cell(np.ones((4, 3)), 0.5, (10, 6)), lambda: G.distance(np.ones((2, 3)), np.zeros(3))):
+        with pytest.raises(ValueError, match=r"points: expected shape \(..., 2\), got \((4|2), 3\)"):
+            call()

@@ -63,3 +63,15 @@ def test_room_owns_cells_and_d_max():
     assert room.flat_cell_index(points).tolist() == (ix * room.ny + iy).tolist()
     np.testing.assert_array_equal(room.cell_index(room.cell_center(ix, iy)), (ix, iy))
     assert room.contains(np.array([[0.0, 0.0], [12.0, 1.0], [-0.1, 1.0]])).tolist() == [True, False, False]
+
+
+def test_components_broadcast_like_numpy_and_refuse_mismatched_shapes():
+    active = np.ones((3, 2), dtype=bool)
+    broadcast = reward_components(active, [False, True], np.zeros((3, 2), bool), [1.0, 2.0], 10.0, PAPER)
+    explicit = reward_components(
+        active, np.tile([False, True], (3, 1)), np.zeros((3, 2), bool), np.tile([1.0, 2.0], (3, 1)), 10.0, PAPER
+    )
+    for key in REWARD_COMPONENTS:
+        np.testing.assert_array_equal(broadcast[key], explicit[key])
+    with pytest.raises(ValueError, match="broadcast"):
+        reward_components(active, [False, True, False], active, np.ones((3, 2)), 10.0, PAPER)

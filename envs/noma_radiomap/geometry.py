@@ -147,7 +147,7 @@ def point_cell(xy: np.ndarray, resolution: float, shape: tuple[int, int]) -> tup
     :param shape: grid shape ``(nx, ny)``
     :return: ``(ix, iy)`` int arrays of shape (...)
     """
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = _points(xy)
     cells = _cells(xy.reshape(-1, 2), float(resolution), shape[0], shape[1], False).reshape(*xy.shape[:-1], 2)
     return cells[..., 0], cells[..., 1]
 
@@ -161,8 +161,16 @@ def flat_cell(xy: np.ndarray, resolution: float, shape: tuple[int, int]) -> np.n
     :param shape: grid shape ``(nx, ny)``
     :return: int array of shape (...)
     """
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = _points(xy)
     return _cells(xy.reshape(-1, 2), float(resolution), shape[0], shape[1], True).reshape(xy.shape[:-1])
+
+
+def _points(xy: np.ndarray) -> np.ndarray:
+    """``xy`` as a float64 array of points (..., 2), or a ValueError naming its shape."""
+    xy = np.asarray(xy, dtype=np.float64)
+    if xy.shape[-1:] != (2,):
+        raise ValueError(f"points: expected shape (..., 2), got {xy.shape}")
+    return xy
 
 
 @compiled
@@ -205,7 +213,7 @@ def distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     :param b: points in metres, broadcastable to ``a``
     :return: distances in metres, shape (...)
     """
-    delta = np.subtract(a, b, dtype=np.float64)
+    delta = _points(np.subtract(a, b, dtype=np.float64))
     return _norms(delta.reshape(-1, 2)).reshape(delta.shape[:-1])
 
 

@@ -93,13 +93,19 @@ def reward_components(
     :param constants: the reward constants
     :return: ``{component: value}`` for each of :data:`REWARD_COMPONENTS`, arrays of shape (...)
     """
-    active = np.asarray(active, dtype=bool)
-    shape, n_robots = active.shape[:-1], active.shape[-1]
+    active, arriving, outage = np.asarray(active, dtype=bool), np.asarray(arriving, dtype=bool), np.asarray(outage, dtype=bool)
+    distance = np.asarray(distance, dtype=np.float64)
+    robots_shape = active.shape
+    if arriving.shape != robots_shape or outage.shape != robots_shape or distance.shape != robots_shape:
+        # Broadcast as numpy would (the kernel does not check bounds)
+        robots_shape = np.broadcast_shapes(robots_shape, arriving.shape, outage.shape, distance.shape)
+        active, arriving, outage, distance = (np.broadcast_to(x, robots_shape) for x in (active, arriving, outage, distance))
+    shape, rows = robots_shape[:-1], (-1, robots_shape[-1])
     values = _component_values(
-        active.reshape(-1, n_robots),
-        np.asarray(arriving, dtype=bool).reshape(-1, n_robots),
-        np.asarray(outage, dtype=bool).reshape(-1, n_robots),
-        np.asarray(distance, dtype=np.float64).reshape(-1, n_robots),
+        active.reshape(rows),
+        arriving.reshape(rows),
+        outage.reshape(rows),
+        distance.reshape(rows),
         float(d_max),
         float(constants.time_cost),
         float(constants.outage_penalty),
