@@ -106,3 +106,25 @@ def test_any_float_action_is_refused_cleanly_or_keeps_every_invariant(env, value
 def test_check_action_returns_rows_per_robot():
     rows = check_action(np.arange(6, dtype=np.float32), 2)
     assert rows.dtype == np.float64 and rows.tolist() == [[0, 1, 2], [3, 4, 5]]
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_vector_env_refuses_a_non_finite_action_of_any_mission_and_changes_nothing(bad):
+    from noma_radiomap.vector import NomaRadioMapVecEnv
+
+    env = NomaRadioMapVecEnv(3, scenario="small")
+    env.reset(seed=0)
+    before = (env.positions.copy(), env.arrived.copy(), env.step_counts.copy(), env._outage_steps.copy())
+    actions = np.zeros((3, 3 * N_ROBOTS))
+    actions[2, 5] = bad
+    with pytest.raises(ValueError, match=r"actions\[2, 5\] \(mission 2, robot 1, power\): expected a finite number"):
+        env.step(actions)
+    with pytest.raises(
+        ValueError, match=r"actions: expected shape \(3, 6\) \(one flat action per mission\), got shape \(3, 2, 3\)"
+    ):
+        env.step(np.zeros((3, N_ROBOTS, 3)))
+    after = (env.positions, env.arrived, env.step_counts, env._outage_steps)
+    for old, new in zip(before, after, strict=True):
+        np.testing.assert_array_equal(old, new)
+    env.step(np.zeros((3, 3 * N_ROBOTS)))  # still usable
+    assert env.step_counts.tolist() == [1, 1, 1]

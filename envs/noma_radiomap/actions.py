@@ -9,11 +9,14 @@ outage". Finite values outside [-1, 1] are valid and clipped by the env, as for 
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
-__all__ = ["COMPONENTS", "check_action"]
+from noma_radiomap.compiled import compiled
+
+__all__ = ["COMPONENTS", "check_action", "check_actions"]
 
 #: The per-robot components of an action, in order.
 COMPONENTS: tuple[str, ...] = ("dx", "dy", "power")
@@ -29,21 +32,59 @@ def check_action(action: Any, n_robots: int) -> np.ndarray:
     :return: the action as ``(n_robots, 3)`` float64, rows ``[dx, dy, power]``
     :raises ValueError: wrong shape, non-numeric entries, or a NaN/inf component (naming robot and component)
     """
-    expected = (3 * n_robots,)
-    try:
-        array = np.asarray(action)
-    except (TypeError, ValueError) as error:  # ragged nested sequences
-        raise ValueError(f"action: expected an array of shape {expected}, got {type(action).__name__} ({error})") from None
-    if array.shape != expected:
-        raise ValueError(f"action: expected shape {expected} ([dx, dy, power] per robot), got shape {array.shape}")
-    if array.dtype.kind not in "fiu":  # floats and integers; not bool, complex, strings or objects
-        raise ValueError(f"action: expected real numbers, got dtype {array.dtype}")
-    values = array.astype(np.float64).reshape(n_robots, 3)
-    if not np.isfinite(values).all():
-        bad = ~np.isfinite(values)
-        u, k = (int(i) for i in np.argwhere(bad)[0])
+    values = _real_array(action, "action", (3 * n_robots,), "[dx, dy, power] per robot").reshape(n_robots, 3)
+    if not _all_finite(values):
+        finite = np.isfinite(values)
+        u, k = (int(i) for i in np.argwhere(~finite)[0])
         raise ValueError(
             f"action[{3 * u + k}] (robot {u}, {COMPONENTS[k]}): expected a finite number, got {values[u, k]!r}; "
-            f"{int(bad.sum())} non-finite component(s) in all; the env state is unchanged"
+            f"{int((~finite).sum())} non-finite component(s) in all; the env state is unchanged"
         )
     return values
+
+
+def check_actions(actions: Any, missions: np.ndarray, n_robots: int) -> np.ndarray:
+    """
+    :func:`check_action` for a batch of missions (the vector env): validate and return the actions as float64
+    ``(len(missions), n_robots, 3)``.
+
+    :param actions: one flat action per mission, an array-like of shape ``(len(missions), 3 * n_robots)``
+    :param missions: the missions' indices (for the messages)
+    :param n_robots: the number of robots ``U``
+    :return: the actions as ``(len(missions), n_robots, 3)`` float64
+    :raises ValueError: wrong shape, non-numeric entries, or a NaN/inf component (naming mission, robot and
+        component)
+    """
+    expected = (len(missions), 3 * n_robots)
+    values = _real_array(actions, "actions", expected, "one flat action per mission").reshape(-1, n_robots, 3)
+    if not _all_finite(values):
+        finite = np.isfinite(values)
+        i, u, k = (int(j) for j in np.argwhere(~finite)[0])
+        raise ValueError(
+            f"actions[{i}, {3 * u + k}] (mission {int(missions[i])}, robot {u}, {COMPONENTS[k]}): expected a finite "
+            f"number, got {values[i, u, k]!r}; {int((~finite).sum())} non-finite component(s) in all; the env state "
+            "is unchanged"
+        )
+    return values
+
+
+@compiled
+def _all_finite(values: np.ndarray) -> bool:
+    """Whether every entry is finite (compiled: one pass, no temporary array)."""
+    for value in values.flat:
+        if not math.isfinite(value):
+            return False
+    return True
+
+
+def _real_array(value: Any, name: str, expected: tuple[int, ...], layout: str) -> np.ndarray:
+    """``value`` as a float64 array of shape ``expected``, or a ValueError naming what is wrong."""
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError) as error:  # ragged nested sequences
+        raise ValueError(f"{name}: expected an array of shape {expected}, got {type(value).__name__} ({error})") from None
+    if array.shape != expected:
+        raise ValueError(f"{name}: expected shape {expected} ({layout}), got shape {array.shape}")
+    if array.dtype.kind not in "fiu":  # floats and integers; not bool, complex, strings or objects
+        raise ValueError(f"{name}: expected real numbers, got dtype {array.dtype}")
+    return array.astype(np.float64)

@@ -18,6 +18,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from noma_radiomap import geometry, rewards
+from noma_radiomap.actions import check_actions
 from noma_radiomap.compiled import compiled
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
 from noma_radiomap.env import NomaRadioMapEnv, mission_observation
@@ -169,7 +170,8 @@ class NomaRadioMapVecEnv(VectorEnv):
         n, u = self.num_envs, self.n_robots
         self.np_randoms: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(n)]
         self.reward_phases = [reward_phase] * n
-        self._weights = np.tile([rewards.phase_weights(reward_phase)[k] for k in env.REWARD_COMPONENTS], (n, 1))
+        # The weight of each reward component per mission (the phase may differ between missions)
+        self._weights = {name: np.full(n, weight) for name, weight in rewards.phase_weights(reward_phase).items()}
         self.positions = np.zeros((n, u, 2))
         self.destinations = np.zeros((n, u, 2))
         self.arrived = np.zeros((n, u), dtype=bool)
@@ -191,7 +193,8 @@ class NomaRadioMapVecEnv(VectorEnv):
         """
         weights = rewards.phase_weights(name)
         rows = self._rows(indices)
-        self._weights[rows] = [weights[k] for k in self.REWARD_COMPONENTS]
+        for component, weight in weights.items():
+            self._weights[component][rows] = weight
         for i in rows:
             self.reward_phases[i] = name
 
@@ -254,23 +257,25 @@ class NomaRadioMapVecEnv(VectorEnv):
                 self._distance_maps = np.zeros((self.num_envs, self.n_robots, env.scenario.room.nx * env.scenario.room.ny))
             for i in rows:
                 self._distance_maps[i] = np.stack([env.radio_map.distance_field(d).ravel() for d in self.destinations[i]])
-        self._channel(rows)
+        self._channel(rows, self.positions[rows])
 
     def step_missions(self, actions: np.ndarray, rows: np.ndarray | slice) -> BatchStep:
         """
         One step of some missions: the stages of :meth:`NomaRadioMapEnv.step` over (rows, U).
 
-        :param actions: actions of the stepped rows, (len(rows), 3U)
+        :param actions: actions of the stepped rows, (len(rows), 3U) (:func:`~noma_radiomap.actions.check_actions`:
+            a wrong shape or a non-finite component raises a ValueError before anything changes)
         :param rows: the missions to step (a slice for all)
         :return: the step's outcome
         """
         env = self.template
-        action = np.asarray(actions, dtype=np.float64).reshape(-1, self.n_robots, 3)
+        row_indices = self._all_rows[rows]
+        action = check_actions(actions, row_indices, self.n_robots)
         active = ~self.arrived[rows]
         positions, at_goal = env._motion.move_batch(self.positions[rows], action[..., :2], self.destinations[rows], active)
         self.positions[rows] = positions
         arriving = at_goal & active
-        gain, interference = self._channel(rows)
+        gain, gain_db, interference = self._channel(rows, positions)
         radio = env.scenario.radio
         power = allocate_power(np.where(active, action[..., 2], -1.0), env._max_power_w)
         result = downlink(power, gain, interference, radio.bandwidth_per_robot_hz, env._noise_w_per_hz, env.multiple_access)
@@ -280,7 +285,6 @@ class NomaRadioMapVecEnv(VectorEnv):
         )
         # A weight per row (the phase may differ between missions), summed as the single env sums its floats
         reward = rewards.weighted_reward(components, self._weight_columns(rows))
-        row_indices = self._all_rows[rows]
         terminated, truncated = _record_step(
             row_indices,
             arriving,
@@ -302,23 +306,28 @@ class NomaRadioMapVecEnv(VectorEnv):
             sinr_db=result.sinr_db,
             decoding_order=result.decoding_order,
             outage=outage,
-            gain_db=self._gain_db[rows].copy(),
+            gain_db=gain_db,
         )
 
-    def _channel(self, rows: np.ndarray | slice) -> tuple[np.ndarray, np.ndarray]:
+    def _channel(self, rows: np.ndarray | slice, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The channel of some missions at their positions: the linear AP gain, the same in dB (also kept for the
+        observation) and the interference power, (rows, U) each."""
         env = self.template
-        gains = env._gain_table[env.scenario.room.flat_cell_index(self.positions[rows])]  # (rows, U, transmitters)
+        gains = env._gain_table[env.scenario.room.flat_cell_index(positions)]  # (rows, U, transmitters)
         if env.channel == "rayleigh" and len(gains):
             # One draw per mission from its own generator: the single env's draws, in its order
             fading = np.stack([rayleigh_fading(self.np_randoms[i], gains.shape[1:]) for i in np.arange(self.num_envs)[rows]])
             gains = faded_gain(gains, fading)
         gain = gains[..., 0]
-        self._gain_db[rows] = linear_to_db(gain)
-        return gain, interference_power(gains[..., 1:], env._interferer_power_w)
+        gain_db = linear_to_db(gain)
+        self._gain_db[rows] = gain_db
+        return gain, gain_db, interference_power(gains[..., 1:], env._interferer_power_w)
 
     def _weight_columns(self, rows: np.ndarray | slice) -> dict[str, np.ndarray]:
         """The weight of each reward component for the stepped rows."""
-        return dict(zip(self.REWARD_COMPONENTS, self._weights[rows].T, strict=True))
+        if isinstance(rows, slice) and rows == slice(None):
+            return self._weights
+        return {name: weights[rows] for name, weights in self._weights.items()}
 
     def _distances(self, rows: np.ndarray | slice) -> np.ndarray:
         env = self.template
