@@ -33,13 +33,7 @@ def check_action(action: Any, n_robots: int) -> np.ndarray:
     :raises ValueError: wrong shape, non-numeric entries, or a NaN/inf component (naming robot and component)
     """
     values = _real_array(action, "action", (3 * n_robots,), "[dx, dy, power] per robot").reshape(n_robots, 3)
-    if not _all_finite(values):
-        finite = np.isfinite(values)
-        u, k = (int(i) for i in np.argwhere(~finite)[0])
-        raise ValueError(
-            f"action[{3 * u + k}] (robot {u}, {COMPONENTS[k]}): expected a finite number, got {values[u, k]!r}; "
-            f"{int((~finite).sum())} non-finite component(s) in all; the env state is unchanged"
-        )
+    _check_finite(values, "action")
     return values
 
 
@@ -57,15 +51,26 @@ def check_actions(actions: Any, missions: np.ndarray, n_robots: int) -> np.ndarr
     """
     expected = (len(missions), 3 * n_robots)
     values = _real_array(actions, "actions", expected, "one flat action per mission").reshape(-1, n_robots, 3)
-    if not _all_finite(values):
-        finite = np.isfinite(values)
-        i, u, k = (int(j) for j in np.argwhere(~finite)[0])
-        raise ValueError(
-            f"actions[{i}, {3 * u + k}] (mission {int(missions[i])}, robot {u}, {COMPONENTS[k]}): expected a finite "
-            f"number, got {values[i, u, k]!r}; {int((~finite).sum())} non-finite component(s) in all; the env state "
-            "is unchanged"
-        )
+    _check_finite(values, "actions", missions)
     return values
+
+
+def _check_finite(values: np.ndarray, name: str, missions: np.ndarray | None = None) -> None:
+    """
+    A ValueError naming the first non-finite component of ``values`` ((n_robots, 3), or (missions, n_robots, 3)
+    with ``missions`` their indices): its index in the flat action(s), its robot and component.
+    """
+    if _all_finite(values):
+        return
+    finite = np.isfinite(values)
+    *mission, u, k = (int(j) for j in np.argwhere(~finite)[0])
+    where = f"mission {int(missions[mission[0]])}, " if missions is not None else ""
+    index = ", ".join(str(j) for j in [*mission, 3 * u + k])
+    raise ValueError(
+        f"{name}[{index}] ({where}robot {u}, {COMPONENTS[k]}): expected a finite number, got "
+        f"{values[(*mission, u, k)]!r}; {int((~finite).sum())} non-finite component(s) in all; the env state is "
+        "unchanged"
+    )
 
 
 @compiled

@@ -316,7 +316,7 @@ class NomaRadioMapVecEnv(VectorEnv):
         gains = env._gain_table[env.scenario.room.flat_cell_index(positions)]  # (rows, U, transmitters)
         if env.channel == "rayleigh" and len(gains):
             # One draw per mission from its own generator: the single env's draws, in its order
-            fading = np.stack([rayleigh_fading(self.np_randoms[i], gains.shape[1:]) for i in np.arange(self.num_envs)[rows]])
+            fading = np.stack([rayleigh_fading(self.np_randoms[i], gains.shape[1:]) for i in self._all_rows[rows]])
             gains = faded_gain(gains, fading)
         gain = gains[..., 0]
         gain_db = linear_to_db(gain)
