@@ -46,6 +46,8 @@ from sb3_dtdpg.experiments.storage import (
     result_path,
     run_folder,
     save_checkpoint,
+    tensorboard_claim,
+    tensorboard_folder,
 )
 
 __all__ = [
@@ -97,12 +99,6 @@ def _evaluation_record(result: Any, n_trajectories: int, reward_phase: str) -> d
         "episodes": result.episodes,
         "trajectories": [np.round(t, 3).tolist() for t in result.trajectories[:n_trajectories]],
     }
-
-
-def _fresh_start(run_dir: Path, tb_dir: Path) -> None:
-    """Remove the leftovers of an interrupted attempt (no result file), or TensorBoard would show both."""
-    for folder in (run_dir, tb_dir):
-        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _build_model(spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None, verbose: int) -> tuple[Any, Any, int]:
@@ -238,7 +234,9 @@ def run_one(
     :param spec: the run
     :param out: output folder
     :param n_trajectories: how many test episodes' trajectories to keep in the result
-    :param tensorboard_dir: TensorBoard root folder (None: ``<out>/tb``)
+    :param tensorboard_dir: TensorBoard root folder (None: ``<out>/tb``, under the output folder's lock); a run
+        claims its folder there (:func:`sb3_dtdpg.experiments.storage.tensorboard_claim`): it never deletes or
+        writes into another run's logs
     :param checkpoint_every: save a checkpoint every this many episodes (None: none)
     :param resume: reuse a finished result or the last checkpoint (both checked against :func:`run_identity`)
     :param threads: torch threads (None: torch's default; 1 in parallel workers)
@@ -246,11 +244,12 @@ def run_one(
     :param verbose: SB3 verbosity
     :param identity: the run's :func:`prepare_run` (None: prepared here)
     :return: the result (as written)
-    :raises RunMismatchError: with ``resume``, a stored result or checkpoint is another run's
+    :raises RunMismatchError: with ``resume``, a stored result or checkpoint is another run's; the TensorBoard
+        folder holds another run's logs
+    :raises OutputBusyError: another process trains into the run's TensorBoard folder
     :raises ValueError: when the budget cannot train (:func:`prepare_run`)
     """
     import torch as th
-    from stable_baselines3.common.logger import configure
 
     import noma_radiomap  # noqa: F401  (registers the env ids in a spawned worker)
 
@@ -259,17 +258,38 @@ def run_one(
         th.set_num_threads(threads)  # one core per run: runs are parallel across processes
     out = Path(out)
     run_dir = run_folder(out, spec)
-    tb_dir = (out / "tb" if tensorboard_dir is None else Path(tensorboard_dir)) / spec.run_id
     checkpoint = None
     if resume:
         finished = load_result(out, spec, identity)
         if finished is not None:
             return finished
         checkpoint = read_checkpoint(run_dir, identity)
-    if checkpoint is None:
-        _fresh_start(run_dir, tb_dir)
-    remove_temp_files(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
+    with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):
+        if checkpoint is None:
+            shutil.rmtree(run_dir, ignore_errors=True)  # leftovers of an interrupted attempt: start afresh
+        remove_temp_files(run_dir)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        return _train_and_record(
+            spec, out, tb_dir, identity, checkpoint, n_trajectories, checkpoint_every, progress_bar, verbose
+        )
+
+
+def _train_and_record(
+    spec: RunSpec,
+    out: Path,
+    tb_dir: Path,
+    identity: dict[str, Any],
+    checkpoint: dict[str, Any] | None,
+    n_trajectories: int,
+    checkpoint_every: int | None,
+    progress_bar: bool,
+    verbose: int,
+) -> dict[str, Any]:
+    """The steps of :func:`run_one` once its folders are ready: build, train, save, evaluate, write the result."""
+    from stable_baselines3.common.logger import configure
+
+    run_dir = run_folder(out, spec)
     env, model, done_episodes = _build_model(spec, run_dir, checkpoint, verbose)
     # A logger of our own, so that the TensorBoard folder is exactly tb/<run_id> (SB3 would append "_1").
     model.set_logger(configure(str(tb_dir), ["tensorboard", "csv", *(["stdout"] if verbose else [])]))

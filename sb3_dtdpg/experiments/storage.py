@@ -2,22 +2,26 @@
 
 Under an output folder ``<out>``, a run owns ``<out>/runs/<run_id>/``: ``result.json`` (written last,
 atomically: its existence means the run is finished), ``progress.json`` while it trains, ``checkpoint.json`` and
-``checkpoints/`` when checkpointed, and the saved models. :func:`output_lock` keeps two jobs out of one folder.
+``checkpoints/`` when checkpointed, and the saved models; its TensorBoard logs go to ``<out>/tb/<run_id>``
+(:func:`tensorboard_folder`, :func:`tensorboard_claim`). :func:`output_lock` keeps two jobs out of one folder.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import os
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.common.files import atomic_write, write_json
-from sb3_dtdpg.experiments.specs import RunSpec, check_identity, run_identity
+from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identity, run_identity
 
 __all__ = [
+    "FOLDER_LOCK",
+    "TENSORBOARD_OWNER",
     "OutputBusyError",
     "clear_checkpoints",
     "load_result",
@@ -28,6 +32,8 @@ __all__ = [
     "result_path",
     "run_folder",
     "save_checkpoint",
+    "tensorboard_claim",
+    "tensorboard_folder",
 ]
 
 
@@ -76,32 +82,124 @@ def read_progress(out: str | Path, spec: RunSpec) -> dict[str, Any] | None:
         return None
 
 
+#: The lock file of a whole-folder job (``compare``, ``reproduce``); a run's lock is held with a shared hold of it.
+FOLDER_LOCK = ".lock"
+
+
 @contextlib.contextmanager
-def output_lock(out: str | Path, name: str = ".lock") -> Iterator[Path]:
+def _hold(path: Path, shared: bool) -> Iterator[bool]:
+    """Hold an OS lock on ``path`` (released when the process ends, even when killed); yield whether it was free."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        import fcntl
+    except ImportError:  # no shared locks without fcntl: every hold is exclusive
+        from filelock import FileLock, Timeout
+
+        lock = FileLock(path, timeout=0)
+        try:
+            lock.acquire()
+        except Timeout:
+            yield False
+            return
+        try:
+            yield True
+        finally:
+            lock.release()
+        return
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        yield True
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock
+
+
+@contextlib.contextmanager
+def output_lock(out: str | Path, name: str = FOLDER_LOCK) -> Iterator[Path]:
     """
-    Hold the lock of an output folder for the duration of a job (an OS file lock: released when the process
-    ends, even when killed).
+    Hold the lock of an output folder, or of one run in it, for the duration of a job (OS file locks:
+    released when the process ends, even when killed).
+
+    A whole-folder job (``compare``, ``reproduce``: ``name`` is :data:`FOLDER_LOCK`) holds the folder's lock
+    alone. A job of one run (``train``: ``name`` is the run's lock, e.g. ``.<run_id>.lock``) holds its own lock
+    and shares the folder's lock with other runs' jobs, so that runs of other ids may train into the folder at
+    the same time, but no whole-folder job while any of them does, and the other way round.
 
     :param out: the folder
     :param name: the lock file's name in it
     :raises OutputBusyError: another process holds it
     """
-    from filelock import FileLock, Timeout
-
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / name
-    lock = FileLock(path, timeout=0)
-    try:
-        lock.acquire()
-    except Timeout:
-        raise OutputBusyError(
-            f"{out} is in use by another job (lock {path}); wait for it to end, or use another output folder"
-        ) from None
-    try:
-        yield path
-    finally:
-        lock.release()
+    with contextlib.ExitStack() as stack:
+        holds = [(out / FOLDER_LOCK, name != FOLDER_LOCK)]
+        if name != FOLDER_LOCK:
+            holds.append((out / name, False))
+        for path, shared in holds:
+            if not stack.enter_context(_hold(path, shared)):
+                raise OutputBusyError(
+                    f"{out} is in use by another job (lock {path}); wait for it to end, or use another output folder"
+                )
+        yield out / name
+
+
+def tensorboard_folder(out: str | Path, spec: RunSpec, tensorboard_dir: str | Path | None = None) -> Path:
+    """:return: a run's TensorBoard folder, ``<tensorboard_dir>/<run_id>`` (default root: ``<out>/tb``)"""
+    return (Path(out) / "tb" if tensorboard_dir is None else Path(tensorboard_dir)) / spec.run_id
+
+
+#: The file in a TensorBoard folder outside the output folder that names the run owning it.
+TENSORBOARD_OWNER = ".owner.json"
+
+
+@contextlib.contextmanager
+def tensorboard_claim(tb_dir: Path, out: Path, run_id: str, fresh: bool) -> Iterator[Path]:
+    """
+    Own a run's TensorBoard folder while the run trains, so that no run deletes or writes into another's logs.
+
+    A folder inside the output folder (the default, ``<out>/tb/<run_id>``) is covered by the output folder's
+    lock (:func:`output_lock`). One elsewhere gets a lock of its own for the run's duration and a
+    :data:`TENSORBOARD_OWNER` file naming the output folder and run id; a folder that holds logs of another
+    output folder's run (or logs of unknown origin) is refused, never emptied.
+
+    :param tb_dir: the run's TensorBoard folder (:func:`tensorboard_folder`)
+    :param out: the run's output folder
+    :param run_id: the run's id
+    :param fresh: the run starts afresh: the folder's old logs (this run's) are removed
+    :raises OutputBusyError: another process trains into the folder
+    :raises RunMismatchError: the folder holds another run's logs
+    """
+    out = Path(out).resolve()
+    owner = {"out": str(out), "run_id": run_id}
+    with contextlib.ExitStack() as stack:
+        outside = not tb_dir.resolve().is_relative_to(out)
+        if outside:
+            lock = tb_dir.parent / f".{tb_dir.name}.lock"
+            if not stack.enter_context(_hold(lock, shared=False)):
+                raise OutputBusyError(
+                    f"TensorBoard folder {tb_dir} is in use by another run (lock {lock}); wait for it to end, or "
+                    "log to another folder"
+                )
+            marker = tb_dir / TENSORBOARD_OWNER
+            if tb_dir.is_dir() and any(tb_dir.iterdir()):
+                try:
+                    stored = json.loads(marker.read_text())
+                except (OSError, ValueError):
+                    stored = None
+                if stored != owner:
+                    whose = "of unknown origin" if stored is None else f"of run {stored.get('run_id')} in {stored.get('out')}"
+                    raise RunMismatchError(
+                        f"TensorBoard folder {tb_dir} holds the logs {whose}, not of run {run_id} in {out}; log to "
+                        f"another folder (the default is inside the output folder) or delete {tb_dir}"
+                    )
+        if fresh:
+            shutil.rmtree(tb_dir, ignore_errors=True)  # this run's own logs of an interrupted attempt
+        if outside:
+            write_json(tb_dir / TENSORBOARD_OWNER, owner)
+        yield tb_dir
 
 
 def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episodes: int) -> Path:

@@ -1,0 +1,76 @@
+"""The run harness under attack: shared TensorBoard folders, jobs on one folder, kills, diverged runs, odd paths."""
+
+import pytest
+
+from sb3_dtdpg.cli import main
+from sb3_dtdpg.experiments.compare import run_compare
+from sb3_dtdpg.experiments.runs import (
+    OutputBusyError,
+    RunMismatchError,
+    RunSpec,
+    output_lock,
+    result_path,
+    run_one,
+)
+
+pytestmark = pytest.mark.filterwarnings("ignore:The inplace keyword:DeprecationWarning", "ignore::FutureWarning")
+
+SPEC = RunSpec("ddpg", "noma", 0, 3, scenario="small", eval_episodes=1, eval_before_transfer=False)
+TRAIN = ["train", "--algo", "ddpg", "--hyperparams", "paper", "--observation", "paper", "--scenario", "small"]
+TRAIN += ["--episodes", "3", "--eval-episodes", "1", "--no-progress"]
+
+
+@pytest.fixture(autouse=True)
+def _agg_backend(monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+
+
+def _events(folder):
+    return sorted(folder.rglob("events.out.tfevents*"))
+
+
+# ---------------------------------------------------------------------------------------------- TensorBoard
+def test_two_trains_with_the_same_settings_keep_both_runs_tensorboard_logs(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the default TensorBoard folder is relative
+    assert main([*TRAIN, "--out", "a"]) == 0
+    assert main([*TRAIN, "--out", "b"]) == 0
+    first, second = _events(tmp_path / "a"), _events(tmp_path / "b")
+    assert len(first) == 1 and len(second) == 1 and first[0].stat().st_size > 0  # one stream per run, both kept
+
+
+def test_a_run_never_deletes_another_runs_tensorboard_logs(tmp_path):
+    shared = tmp_path / "tb"
+    run_one(SPEC, tmp_path / "a", tensorboard_dir=shared)
+    kept = _events(shared / SPEC.run_id)
+    assert len(kept) == 1
+    with pytest.raises(RunMismatchError, match=r"holds the logs of run ddpg_noma_s0 in .*a, not of run"):
+        run_one(SPEC, tmp_path / "b", tensorboard_dir=shared)
+    assert _events(shared / SPEC.run_id) == kept and not result_path(tmp_path / "b", SPEC).exists()
+    run_one(SPEC, tmp_path / "a", tensorboard_dir=shared)  # its own run again: a fresh start replaces its logs
+    assert len(_events(shared / SPEC.run_id)) == 1
+
+
+def test_a_tensorboard_folder_in_use_is_refused(tmp_path):
+    shared = tmp_path / "tb"
+    with output_lock(shared, f".{SPEC.run_id}.lock"):  # what another run's claim holds
+        with pytest.raises(OutputBusyError, match=r"TensorBoard folder .* is in use by another run"):
+            run_one(SPEC, tmp_path / "a", tensorboard_dir=shared)
+
+
+# ---------------------------------------------------------------------------------------------- locks
+def test_compare_and_train_exclude_each_other_on_one_folder(tmp_path):
+    with output_lock(tmp_path):  # compare's (and reproduce's) lock
+        with pytest.raises(OutputBusyError, match="in use by another job"):
+            with output_lock(tmp_path, f".{SPEC.run_id}.lock"):  # train's
+                pass
+    with output_lock(tmp_path, f".{SPEC.run_id}.lock"):
+        with output_lock(tmp_path, ".other_run.lock"):  # trains of other runs share the folder
+            pass
+        with pytest.raises(OutputBusyError, match="in use by another job"):
+            with output_lock(tmp_path, f".{SPEC.run_id}.lock"):  # but not one run
+                pass
+        with pytest.raises(OutputBusyError, match="in use by another job"):
+            run_compare(tmp_path, budget="_micro", seeds=1, progress=False)
+    with output_lock(tmp_path):  # all released
+        pass
+    assert not any(tmp_path.glob("runs/*"))
