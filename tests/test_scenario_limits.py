@@ -205,3 +205,46 @@ def test_a_recursive_alias_is_refused(tmp_path, small_yaml):
 def test_unreadable_path_is_a_value_error(tmp_path):
     with pytest.raises(ValueError, match="unknown built-in name and no such file"):
         load_scenario(tmp_path / "missing.yaml")
+
+
+def _big_room(small_dict, n_interferers):
+    """The report's room: 1000 x 1000 m at 0.5 m (4e6 cells, within MAX_GRID_CELLS), with interferers."""
+    data = copy.deepcopy(small_dict)
+    data["room"].update(width=1000.0, depth=1000.0, resolution=0.5)
+    data["interferers"] = [{"name": f"i{k}", "position": [1.0 + k, 1.0, 2.0], "power_dbm": 10.0} for k in range(n_interferers)]
+    return data
+
+
+def test_a_scenario_too_big_for_memory_is_refused_before_anything_is_allocated(small_dict):
+    import tracemalloc
+
+    data = _big_room(small_dict, 50)
+    tracemalloc.start()
+    start = time.process_time()
+    try:
+        with pytest.raises(
+            ValueError, match=r"4,000,000 cells x 51 transmitters .* need about 14\.\d+ GiB .* cap of 1\.00 GiB"
+        ):
+            Scenario.from_dict(data)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert time.process_time() - start < 1.0 and peak < 50 * 2**20  # nothing of the grid's size was built
+
+
+def test_the_memory_cap_is_documented_and_overridable(small_dict, monkeypatch):
+    from noma_radiomap import RadioMap, radiomap
+
+    assert radiomap.MAX_MEMORY_BYTES == 2**30
+    estimate = radiomap.estimated_memory(Scenario.from_dict(_big_room(small_dict, 1)))  # 1 interferer: under the cap
+    assert estimate["cells"] == 4_000_000 and estimate["transmitters"] == 2
+    assert estimate["total"] == estimate["maps"] + estimate["tables"] + estimate["occlusion"] < 2**30
+    small = load_scenario("small")
+    monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", "2e10")
+    assert Scenario.from_dict(_big_room(small_dict, 50)).room.shape == (2000, 2000)  # allowed by the user
+    monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", "1000")  # the radio map checks again
+    with pytest.raises(ValueError, match=r"384 cells x 2 transmitters .* more than the cap"):
+        RadioMap(small)
+    monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", "lots")
+    with pytest.raises(ValueError, match=r"NOMA_RADIOMAP_MAX_MEMORY_BYTES: expected a positive number of bytes, got 'lots'"):
+        RadioMap(small)

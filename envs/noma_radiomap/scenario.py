@@ -14,7 +14,8 @@ keys are errors, and a file that is not UTF-8, nests deeper than :data:`MAX_NEST
 :data:`MAX_FILE_BYTES` or holds more than :data:`MAX_NODES` values once its aliases are expanded (an alias
 bomb) gives a ``ValueError`` naming the file. Limits checked at load time, before anything
 is built: at most :data:`MAX_GRID_CELLS` grid cells, :data:`MAX_SUBSTEPS` motion sub-steps per env step
-(``V_max time_step`` over half a cell), :data:`MAX_LIST_ITEMS` entries in any list, and physical ranges
+(``V_max time_step`` over half a cell), :data:`MAX_LIST_ITEMS` entries in any list, the estimated memory of
+the radio map and the env's tables (:data:`noma_radiomap.radiomap.MAX_MEMORY_BYTES`), and physical ranges
 (:data:`RANGES`) for every radio, power, height and mission constant. Error messages quote values through
 a bounded ``repr`` (at most :data:`MAX_MESSAGE_CHARS` characters), so a YAML alias bomb cannot hang them.
 """
@@ -666,6 +667,9 @@ def _parse_scenario(data: Any, source: str | None) -> Scenario:
         source=source,
     )
     _check_robot(scenario.robot, room, scenario.mission)
+    from noma_radiomap.radiomap import check_memory  # the radio map's module imports this one
+
+    check_memory(scenario)  # before the layout checks build the grid
     _check_layout(scenario)
     return scenario
 
