@@ -1,11 +1,16 @@
 """The run harness under attack: shared TensorBoard folders, jobs on one folder, kills, diverged runs, odd paths."""
 
+import dataclasses
+import json
+import math
+
 import pytest
 
 from sb3_dtdpg.cli import main
 from sb3_dtdpg.experiments.compare import run_compare
 from sb3_dtdpg.experiments.runs import (
     OutputBusyError,
+    RunDivergedError,
     RunMismatchError,
     RunSpec,
     output_lock,
@@ -74,3 +79,17 @@ def test_compare_and_train_exclude_each_other_on_one_folder(tmp_path):
     with output_lock(tmp_path):  # all released
         pass
     assert not any(tmp_path.glob("runs/*"))
+
+
+# ---------------------------------------------------------------------------------------------- diverged runs
+def test_a_diverged_run_records_its_failure_and_leaves_no_checkpoint_behind(tmp_path):
+    diverging = dataclasses.replace(SPEC, episodes=6, learning_rate=math.inf)
+    with pytest.raises(RunDivergedError, match=r"ddpg_noma_s0: training diverged at step \d+: the policy's .* non-finite"):
+        run_one(diverging, tmp_path, checkpoint_every=1, resume=True)
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    assert sorted(p.name for p in run_dir.iterdir()) == ["failed.json"]
+    failure = json.loads((run_dir / "failed.json").read_text())
+    assert failure["identity"]["spec"]["learning_rate"] == math.inf and "non-finite" in failure["error"]
+    # The folder is not held against other settings: the next run trains (before: RunMismatchError)
+    result = run_one(dataclasses.replace(SPEC, episodes=6), tmp_path, checkpoint_every=1, resume=True)
+    assert result["train"]["episodes"] == 6 and not (run_dir / "failed.json").exists()

@@ -86,6 +86,10 @@ RANGES: dict[str, tuple[float, float]] = {
     "mission.outage_penalty": (0.0, 1e6),
     "mission.max_steps": (1, 10_000_000),
     "mission.time_step": (0.0, 3_600.0),
+    # Rewards: an episode's return (at most max_steps x robots of them) stays far inside the float32 replay buffer
+    "mission.time_cost": (-1e6, 1e6),
+    "mission.arrival_reward": (-1e6, 1e6),
+    "mission.success_reward": (-1e6, 1e6),
 }
 
 
@@ -520,7 +524,7 @@ def _parse_mission(data: Any) -> Mission:
         time_step=_number(d["time_step"], "mission.time_step", positive=True),
         **{name: _number(d.get(name, defaults[name]), f"mission.{name}") for name in reward_keys},
     )
-    for name in ("t_total", "outage_penalty", "max_steps", "time_step"):
+    for name in ("t_total", "outage_penalty", "max_steps", "time_step", *reward_keys):
         _check_range(getattr(mission, name), f"mission.{name}")
     return mission
 

@@ -33,11 +33,18 @@ from stable_baselines3.common.callbacks import BaseCallback
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files, write_json
 from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS, Budget, check_budget, get_budget
 from sb3_dtdpg.experiments.pool import RunReport, run_in_pool, worker_pool
-from sb3_dtdpg.experiments.run_callbacks import EpisodeCounter, EpisodeReturnLogger, PeriodicCheckpoint, RunProgress
-from sb3_dtdpg.experiments.specs import RUN_FORMAT_VERSION, RunMismatchError, RunSpec, run_identity
+from sb3_dtdpg.experiments.run_callbacks import (
+    EpisodeCounter,
+    EpisodeReturnLogger,
+    PeriodicCheckpoint,
+    RunProgress,
+    check_finite,
+)
+from sb3_dtdpg.experiments.specs import RUN_FORMAT_VERSION, RunDivergedError, RunMismatchError, RunSpec, run_identity
 from sb3_dtdpg.experiments.storage import (
     OutputBusyError,
     clear_checkpoints,
+    failure_path,
     load_result,
     output_lock,
     progress_path,
@@ -59,6 +66,7 @@ __all__ = [
     "EpisodeReturnLogger",
     "OutputBusyError",
     "PeriodicCheckpoint",
+    "RunDivergedError",
     "RunMismatchError",
     "RunProgress",
     "RunReport",
@@ -166,9 +174,28 @@ def _train(model: Any, callbacks: list[BaseCallback], total_timesteps: int, resu
                 reset_num_timesteps=not resumed,
                 progress_bar=progress_bar,
             )
+        check_finite(model)
     finally:
         model.logger.close()  # flush and close the CSV and TensorBoard files, also on an interruption
     return time.perf_counter() - start
+
+
+def _record_divergence(out: Path, spec: RunSpec, identity: dict[str, Any], model: Any, error: Exception) -> RunDivergedError:
+    """
+    A run whose training failed with non-finite weights has diverged: its checkpoints are removed (resuming
+    would diverge again, and they would hold the folder against other settings) and ``failed.json`` records
+    the failure. :return: the error to raise
+    """
+    try:
+        check_finite(model)
+    except RunDivergedError as diverged:
+        clear_checkpoints(run_folder(out, spec))
+        write_json(failure_path(out, spec), {"identity": identity, "error": f"{type(error).__name__}: {error}"}, indent=1)
+        return RunDivergedError(
+            f"{spec.run_id}: {diverged}; its checkpoints were removed and the failure recorded in "
+            f"{failure_path(out, spec)}: run it again with other settings (the next run starts afresh)"
+        )
+    raise error
 
 
 def _evaluations(
@@ -295,7 +322,10 @@ def _train_and_record(
     model.set_logger(configure(str(tb_dir), ["tensorboard", "csv", *(["stdout"] if verbose else [])]))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
     counter, callbacks, total_timesteps = _callbacks(spec, out, model, max_steps, done_episodes, identity, checkpoint_every)
-    train_s = _train(model, callbacks, total_timesteps, checkpoint is not None, progress_bar)
+    try:
+        train_s = _train(model, callbacks, total_timesteps, checkpoint is not None, progress_bar)
+    except Exception as error:  # not KeyboardInterrupt: an interrupted run keeps its checkpoint
+        raise _record_divergence(out, spec, identity, model, error) from error
     atomic_write(run_dir / "model.zip", model.save)
     curriculum = getattr(model, "curriculum_state", None)
     if curriculum is not None:

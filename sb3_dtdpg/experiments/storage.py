@@ -24,6 +24,7 @@ __all__ = [
     "TENSORBOARD_OWNER",
     "OutputBusyError",
     "clear_checkpoints",
+    "failure_path",
     "load_result",
     "output_lock",
     "progress_path",
@@ -246,6 +247,11 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
         check_identity(checkpoint, identity, pointer)
     checkpoint["path"] = run_dir / checkpoint["folder"]
     return checkpoint if (checkpoint["path"] / "model.zip").exists() else None
+
+
+def failure_path(out: str | Path, spec: RunSpec) -> Path:
+    """:return: the record of a failed run (:func:`sb3_dtdpg.experiments.runs.run_one` writes it when training diverges)"""
+    return run_folder(out, spec) / "failed.json"
 
 
 def clear_checkpoints(run_dir: Path) -> None:
