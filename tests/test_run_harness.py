@@ -3,6 +3,11 @@
 import dataclasses
 import json
 import math
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 
@@ -93,3 +98,39 @@ def test_a_diverged_run_records_its_failure_and_leaves_no_checkpoint_behind(tmp_
     # The folder is not held against other settings: the next run trains (before: RunMismatchError)
     result = run_one(dataclasses.replace(SPEC, episodes=6), tmp_path, checkpoint_every=1, resume=True)
     assert result["train"]["episodes"] == 6 and not (run_dir / "failed.json").exists()
+
+
+# ---------------------------------------------------------------------------------------------- SIGKILL
+COMPARE = "from sb3_dtdpg.experiments.compare import run_compare\n"
+COMPARE += "run_compare({out!r}, budget='_micro', seeds=1, algos=['ddpg'], n_workers=1, progress=False)\n"
+
+
+def _results(out):
+    """Each run's result without its timings (the only values that differ between two runs of one spec)."""
+    results = {}
+    for path in sorted(out.glob("runs/*/result.json")):
+        result = json.loads(path.read_text())
+        del result["train"]["wall_s"], result["train"]["steps_per_s"]
+        results[path.parent.name] = result
+    return results
+
+
+def test_sigkill_of_compare_while_training_then_a_rerun_gives_the_uninterrupted_results(tmp_path):
+    killed, reference = tmp_path / "killed", tmp_path / "reference"
+    job = subprocess.Popen([sys.executable, "-c", COMPARE.format(out=str(killed))], start_new_session=True)
+    deadline = time.monotonic() + 240
+    try:
+        while not any(killed.glob("runs/*/progress.json")):  # a run is training
+            assert job.poll() is None and time.monotonic() < deadline, "compare ended before it was killed"
+            time.sleep(0.02)
+    finally:
+        os.killpg(job.pid, signal.SIGKILL)  # the job and its workers, at once
+        job.wait()
+    assert not any(killed.glob("runs/*/result.json"))  # killed mid-training: nothing finished
+    assert any(killed.glob("tb/*/events.out.tfevents*"))  # and it had started logging
+    run_compare(killed, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
+    run_compare(reference, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
+    assert _results(killed) == _results(reference) and sorted(_results(killed)) == ["ddpg_noma_s0", "ddpg_oma_s0"]
+    for run_id in _results(killed):
+        assert len(_events(killed / "tb" / run_id)) == 1  # one event stream per run: the killed one's is gone
+    assert not list(killed.rglob("*.tmp")) and not list(killed.rglob("progress.json"))
