@@ -15,6 +15,7 @@ from sb3_dtdpg.cli import main
 from sb3_dtdpg.experiments.compare import run_compare
 from sb3_dtdpg.experiments.runs import (
     OutputBusyError,
+    PeriodicCheckpoint,
     RunDivergedError,
     RunMismatchError,
     RunSpec,
@@ -134,3 +135,82 @@ def test_sigkill_of_compare_while_training_then_a_rerun_gives_the_uninterrupted_
     for run_id in _results(killed):
         assert len(_events(killed / "tb" / run_id)) == 1  # one event stream per run: the killed one's is gone
     assert not list(killed.rglob("*.tmp")) and not list(killed.rglob("progress.json"))
+
+
+# ---------------------------------------------------------------------------------------------- damaged files
+@pytest.mark.parametrize("name", ["result.json", "checkpoint.json"])
+@pytest.mark.parametrize("content", ["{trunc", "[1, 2]", ""])
+def test_a_damaged_record_is_a_named_error(tmp_path, name, content):
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    run_dir.mkdir(parents=True)
+    (run_dir / name).write_text(content)
+    with pytest.raises(ValueError, match=rf"{run_dir / name} is unreadable .*; delete {run_dir} to run this run again"):
+        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    assert (run_dir / name).read_text() == content  # nothing removed behind the user's back
+
+
+def test_a_damaged_checkpoint_model_is_a_named_error(tmp_path, monkeypatch):
+    original = PeriodicCheckpoint._on_rollout_end
+
+    def interrupt_after_first_checkpoint(self):
+        due = self._due
+        original(self)
+        if due:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(PeriodicCheckpoint, "_on_rollout_end", interrupt_after_first_checkpoint)
+    with pytest.raises(KeyboardInterrupt):
+        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    monkeypatch.setattr(PeriodicCheckpoint, "_on_rollout_end", original)
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    (model := next(run_dir.glob("checkpoints/*/model.zip"))).write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match=rf"checkpoint in {model.parent} cannot be loaded .*delete .*checkpoint\.json"):
+        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    (run_dir / "checkpoint.json").unlink()  # the fix the message names
+    assert run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)["train"]["resumed_at_episode"] is None
+
+
+def test_a_full_disk_at_the_result_leaves_no_partial_file_and_a_rerun_finishes(tmp_path, monkeypatch):
+    from sb3_dtdpg.common import files
+
+    write_text = files.Path.write_text
+
+    def full_disk(self, text, *args, **kwargs):
+        if self.name.startswith(".result.json"):
+            write_text(self, text[: len(text) // 2])  # part of it written, then the disk is full
+            raise OSError(28, "No space left on device")
+        return write_text(self, text, *args, **kwargs)
+
+    monkeypatch.setattr(files.Path, "write_text", full_disk)
+    with pytest.raises(OSError, match="No space left on device"):
+        run_one(SPEC, tmp_path, resume=True)
+    monkeypatch.undo()
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    assert not (run_dir / "result.json").exists() and not list(run_dir.glob("*.tmp"))
+    assert run_one(SPEC, tmp_path, resume=True)["train"]["episodes"] == 3
+    with output_lock(tmp_path):  # the lock was never held by the run: nothing to release
+        pass
+
+
+# ---------------------------------------------------------------------------------------------- paths and HOME
+def test_paths_with_spaces_and_symlinks(tmp_path):
+    real = tmp_path / "real folder"
+    real.mkdir()
+    (tmp_path / "link to it").symlink_to(real)
+    out = tmp_path / "link to it" / "out put"
+    result = run_one(SPEC, out)
+    stored = json.loads((real / "out put" / "runs" / SPEC.run_id / "result.json").read_text())
+    assert json.dumps(stored, sort_keys=True) == json.dumps(result, sort_keys=True)  # (NaN != NaN: compare texts)
+    # A TensorBoard folder reached through a symlink into the output folder is the output folder's
+    run_one(SPEC, real / "out put", tensorboard_dir=tmp_path / "link to it" / "out put" / "tb")
+    assert not list((real / "out put" / "tb").rglob(".owner.json")) and len(_events(real / "out put" / "tb")) == 1
+
+
+def test_train_works_without_home(tmp_path):
+    env = {key: value for key, value in os.environ.items() if key != "HOME"}
+    code = "import sys\nfrom sb3_dtdpg.cli import main\nsys.exit(main(sys.argv[1:]))\n"
+    done = subprocess.run(
+        [sys.executable, "-c", code, *TRAIN, "--out", "o"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "o" / "runs" / SPEC.run_id / "result.json").exists() and len(_events(tmp_path / "o" / "tb")) == 1

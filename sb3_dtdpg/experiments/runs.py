@@ -115,9 +115,16 @@ def _build_model(spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None
 
     env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
     if checkpoint is not None:
-        model = algorithm_class(spec.algo).load(checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose)
-        if (checkpoint["path"] / "replay_buffer.pkl").exists():
-            model.load_replay_buffer(checkpoint["path"] / "replay_buffer.pkl")
+        try:
+            model = algorithm_class(spec.algo).load(checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose)
+            if (checkpoint["path"] / "replay_buffer.pkl").exists():
+                model.load_replay_buffer(checkpoint["path"] / "replay_buffer.pkl")
+        except Exception as error:  # written atomically: damaged from outside
+            env.close()
+            raise ValueError(
+                f"the checkpoint in {checkpoint['path']} cannot be loaded ({type(error).__name__}: {str(error)[:200]}); "
+                f"delete {run_dir / 'checkpoint.json'} to start the run afresh"
+            ) from error
         return env, model, int(checkpoint["episodes"])
     destination_episodes = None
     if spec.algo == "dtdpg":

@@ -57,6 +57,22 @@ def progress_path(out: str | Path, spec: RunSpec) -> Path:
     return run_folder(out, spec) / "progress.json"
 
 
+def _read_record(path: Path) -> dict[str, Any]:
+    """
+    :param path: a result or checkpoint record (written atomically: unreadable only when damaged from outside)
+    :return: its content
+    :raises ValueError: naming the file and the fix when it is not a JSON mapping
+    """
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        record = error
+    if not isinstance(record, dict):
+        reason = f"{type(record).__name__}: {record}" if isinstance(record, Exception) else "not a JSON mapping"
+        raise ValueError(f"{path} is unreadable ({str(reason)[:200]}); delete {path.parent} to run this run again")
+    return record
+
+
 def load_result(out: str | Path, spec: RunSpec, identity: dict[str, Any] | None = None) -> dict[str, Any] | None:
     """
     The stored result of a finished run, checked against the run's identity.
@@ -66,11 +82,12 @@ def load_result(out: str | Path, spec: RunSpec, identity: dict[str, Any] | None 
     :param identity: the run's :func:`run_identity` (None: computed here)
     :return: the result, or None when the run has not finished
     :raises RunMismatchError: the stored result is another run's (another budget, scenario, hyperparameters ...)
+    :raises ValueError: the result file is damaged
     """
     path = result_path(out, spec)
     if not path.exists():
         return None
-    result = json.loads(path.read_text())
+    result = _read_record(path)
     check_identity(result, run_identity(spec) if identity is None else identity, path)
     return result
 
@@ -237,12 +254,13 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
     :param identity: the run's :func:`run_identity` (None: not checked)
     :return: ``checkpoint.json``'s content plus ``path`` (the folder), or None when there is none
     :raises RunMismatchError: the checkpoint is another run's
+    :raises ValueError: the checkpoint record is damaged
     """
     run_dir = Path(run_dir)
     pointer = run_dir / "checkpoint.json"
     if not pointer.exists():
         return None
-    checkpoint = json.loads(pointer.read_text())
+    checkpoint = _read_record(pointer)
     if identity is not None:
         check_identity(checkpoint, identity, pointer)
     checkpoint["path"] = run_dir / checkpoint["folder"]
