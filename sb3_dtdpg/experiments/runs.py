@@ -255,10 +255,10 @@ def run_one(
     baselines: ``combined``), the network saved before the transfer on the first phase's; the result records
     them (``reward_phases``, and ``reward_phase`` in each evaluation record).
 
-    The model trains for ``spec.episodes`` episodes (``StopTrainingOnMaxEpisodes``; or ``spec.timesteps``
-    timesteps), logging to TensorBoard in ``<tensorboard_dir>/<run_id>`` (SB3's scalars and the ``mission/*``
-    ones). DT-DPG also saves its network at the end of the destination phase (the paper's theta_X), which is
-    evaluated too ("before transfer").
+    The model trains for ``spec.episodes`` episodes (counted and stopped by the run's
+    :class:`~sb3_dtdpg.experiments.run_callbacks.EpisodeReturnLogger`; or ``spec.timesteps`` timesteps), logging
+    to TensorBoard in ``<tensorboard_dir>/<run_id>`` (SB3's scalars and the ``mission/*`` ones). DT-DPG also
+    saves its network at the end of the destination phase (the paper's theta_X), which is evaluated too ("before transfer").
 
     Without ``resume``, leftovers of an interrupted attempt are removed and the run starts afresh (so that a
     run's result depends on its seed only). With ``resume``, a finished run's result is returned as is and an
@@ -281,6 +281,7 @@ def run_one(
     :raises RunMismatchError: with ``resume``, a stored result or checkpoint is another run's; the TensorBoard
         folder holds another run's logs
     :raises OutputBusyError: another process trains into the run's TensorBoard folder
+    :raises RunDivergedError: training diverged (``failed.json`` records it; the checkpoints are removed)
     :raises ValueError: when the budget cannot train (:func:`prepare_run`)
     """
     import torch as th
