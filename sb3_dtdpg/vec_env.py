@@ -18,7 +18,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 import noma_radiomap  # noqa: F401  (registers the ids)
-from noma_radiomap.core import MissionStep, summary_row
+from noma_radiomap.core import MissionStep
 from noma_radiomap.vector import NomaRadioMapVecEnv
 
 
@@ -69,9 +69,8 @@ class MissionVecEnv(VecEnv):
         infos = step_infos(result)
         if dones.any():
             ended = np.flatnonzero(dones)
-            summaries = vec.episode_summaries(ended)
-            for j, k in enumerate(ended):
-                infos[k].update(summary_row(summaries, j), terminal_observation=obs[k])
+            for k in ended:
+                infos[k]["terminal_observation"] = obs[k]
             vec.reset_missions(ended)
             obs = obs.copy()
             obs[ended] = vec.observations(ended)
@@ -105,8 +104,7 @@ class MissionVecEnv(VecEnv):
 
 def step_infos(result: MissionStep) -> list[dict[str, Any]]:
     """
-    The ``info`` of each stepped mission as a ``DummyVecEnv`` of single envs gives it (without the episode
-    summary): the single env's ``info`` (:meth:`noma_radiomap.core.MissionStep.info`) and SB3's
+    The ``info`` of each stepped mission as a ``DummyVecEnv`` of single envs gives it: the single env's ``info`` (:meth:`noma_radiomap.core.MissionStep.info`) and SB3's
     ``TimeLimit.truncated``.
 
     :param result: the outcome of a step of the missions

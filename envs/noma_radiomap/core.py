@@ -36,7 +36,8 @@ TASKS: tuple[str, ...] = ("missions", "paper")
 PAPER_MAX_STEPS = 1000
 #: The per-robot arrays of every step's ``info`` (arrays of length U in scenario order).
 INFO_KEYS: tuple[str, ...] = ("rate_bps", "sinr_db", "outage", "power_w", "gain_db", "decoding_order")
-#: The end-of-episode figures of the ``info`` (:meth:`MissionCore.episode_summaries`).
+#: The episode summary in every ``info``, as of the step (:meth:`MissionCore.episode_summaries`): the envs cannot see
+#: where an outer ``TimeLimit`` ends an episode, and its last ``info`` must have it.
 SUMMARY_KEYS: tuple[str, ...] = ("is_success", "mqi", "mission_time", "outage_steps")
 RESET_FIRST = "call reset() first"
 _ALL = slice(None)
@@ -57,9 +58,12 @@ class MissionStep:
     decoding_order: np.ndarray
     outage: np.ndarray
     gain_db: np.ndarray
+    summary: dict[str, np.ndarray]
+    """The episode summaries as of the step (:meth:`MissionCore.episode_summaries`)."""
 
     def info(self, k: int) -> dict[str, Any]:
-        """The ``info`` of the ``k``-th stepped mission (without its episode summary)."""
+        """The ``info`` of the ``k``-th stepped mission: :data:`INFO_KEYS`, ``reward_components`` and the episode
+        summary as of the step (:data:`SUMMARY_KEYS`)."""
         return {
             "reward_components": {name: float(value[k]) for name, value in self.components.items()},
             "rate_bps": self.rate_bps[k],
@@ -68,6 +72,7 @@ class MissionStep:
             "power_w": self.power_w[k],
             "gain_db": self.gain_db[k],
             "decoding_order": self.decoding_order[k],
+            **summary_row(self.summary, k),
         }
 
 
@@ -312,6 +317,7 @@ class MissionCore:
             decoding_order=result.decoding_order,
             outage=outage,
             gain_db=gain_db,
+            summary=self.episode_summaries(rows),
         )
 
     def _channel(self, rows: np.ndarray | slice, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

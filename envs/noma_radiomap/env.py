@@ -221,10 +221,7 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         result = core.step(check_action(action, self.n_robots)[None], _ALL)
         self._trajectory.append(core.positions[0].copy())
         terminated = bool(result.terminated[0])
-        info = result.info(0)
-        # The episode summary as of this step, in every info: the env cannot see where an outer TimeLimit
-        # (gymnasium.make(..., max_episode_steps=n)) ends the episode, and the last info must have it.
-        info.update(summary_row(core.episode_summaries(_ALL), 0))
+        info = result.info(0)  # with the episode summary as of this step (core.SUMMARY_KEYS)
         if self.render_mode == "human":
             self.render()
         return core.observations()[0], float(result.reward[0]), terminated, False, info

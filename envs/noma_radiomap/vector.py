@@ -16,7 +16,7 @@ from gymnasium.vector.utils import batch_space
 
 from noma_radiomap import rewards
 from noma_radiomap.actions import check_actions
-from noma_radiomap.core import INFO_KEYS, MissionCore, MissionStep, summary_row
+from noma_radiomap.core import INFO_KEYS, SUMMARY_KEYS, MissionCore, MissionStep, summary_row
 from noma_radiomap.env import NomaRadioMapEnv
 from noma_radiomap.observations import observation_space
 
@@ -310,12 +310,8 @@ class NomaRadioMapVecEnv(VectorEnv):
         infos["_reward_components"] = mask
         for key in INFO_KEYS:
             infos[key], infos[f"_{key}"] = _full(getattr(result, key), rows, mask), mask
-        ended = rows[result.terminated | result.truncated]
-        if len(ended):
-            end_mask = np.zeros(n, dtype=bool)
-            end_mask[ended] = True
-            for key, value in self.core.episode_summaries(ended).items():
-                infos[key], infos[f"_{key}"] = _full(value, ended, end_mask), end_mask
+        for key in SUMMARY_KEYS:
+            infos[key], infos[f"_{key}"] = _full(result.summary[key], rows, mask), mask
 
     def close_extras(self, **kwargs: Any) -> None:
         pass
