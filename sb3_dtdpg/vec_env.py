@@ -104,8 +104,8 @@ class MissionVecEnv(VecEnv):
 
 def step_infos(result: MissionStep) -> list[dict[str, Any]]:
     """
-    The ``info`` of each stepped mission as a ``DummyVecEnv`` of single envs gives it: the single env's ``info`` (:meth:`noma_radiomap.core.MissionStep.info`) and SB3's
-    ``TimeLimit.truncated``.
+    The ``info`` of each stepped mission as a ``DummyVecEnv`` of single envs gives it: the single env's ``info``
+    (:meth:`noma_radiomap.core.MissionStep.info`) and SB3's ``TimeLimit.truncated``.
 
     :param result: the outcome of a step of the missions
     :return: one dict per stepped mission, in row order

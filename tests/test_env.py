@@ -14,9 +14,9 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 import noma_radiomap
 from noma_radiomap import NomaRadioMapEnv, RadioMap, Scenario, load_scenario
+from noma_radiomap.core import PAPER_MAX_STEPS
 from noma_radiomap.downlink import allocate_power, downlink
 from noma_radiomap.propagation import EXPECTED_FADING_DB, db_to_linear, dbm_to_watt
-from noma_radiomap.core import PAPER_MAX_STEPS
 from noma_radiomap.registration import ENV_IDS, register_envs
 
 MALL_STEPS = load_scenario("mall").mission.max_steps

@@ -101,7 +101,9 @@ class Observer:
 
     def rows(self, positions: np.ndarray, destinations: np.ndarray, gain_db: np.ndarray, arrived: np.ndarray) -> np.ndarray:
         """:meth:`__call__` of (M, U) robots: float64 (M, U, 2) points, float64 (M, U) gains, bool (M, U) flags."""
-        return _observe_rows(positions, destinations, gain_db, arrived, *self._constants, self.distance_scale, self.values_per_robot)
+        return _observe_rows(
+            positions, destinations, gain_db, arrived, *self._constants, self.distance_scale, self.values_per_robot
+        )
 
 
 def goal_features(
