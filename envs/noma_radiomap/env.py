@@ -51,7 +51,10 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Observation Space
 
-    ``Box(-1, 1, (6U,), float32)``, per robot ``u``:
+    ``Box(-1, 1, (k U,), float32)`` in one of three layouts (``observation``, :mod:`noma_radiomap.observations`;
+    docs/MODEL.md, Observations). ``"goal"`` (the default, ``9U``): the ``"destinations"`` values of every robot,
+    then per robot the unit vector towards its destination and ``min(d / 10 m, 1)`` (0 once arrived).
+    ``"destinations"`` (``6U``), per robot ``u``:
 
     | Num      | Observation                                                           | Min | Max |
     |----------|-----------------------------------------------------------------------|-----|-----|
@@ -59,6 +62,9 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     | 6u+2, +3 | destination, scaled like the position                                 | -1  | 1   |
     | 6u + 4   | AP channel gain ``g_u`` incl. fading in dB, [-130, -30] dB mapped onto [-1, 1], clipped | -1  | 1   |
     | 6u + 5   | arrived flag: 1 once the robot has arrived, else 0                     | 0   | 1   |
+
+    ``"paper"`` (``3U``): the paper's state Eq. (24), per robot its position and gain (scaled as above), nothing
+    else; the default of the paper's task.
 
     ## Rewards
 
@@ -74,8 +80,10 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ``info`` per step (per-robot arrays of length U): ``rate_bps``, ``sinr_db``, ``outage`` (bool, only for
     robots that had not arrived), ``power_w``, ``gain_db`` (incl. fading) and ``decoding_order`` (robot
-    indices, weakest to strongest equivalent gain). At the end of an episode also ``is_success``, ``mqi``,
-    ``mission_time`` (per robot: steps until arrival, ``max_steps`` if never) and ``outage_steps`` (per robot).
+    indices, weakest to strongest equivalent gain), and the episode summary as of the step: ``is_success``,
+    ``mqi``, ``mission_time`` (per robot: steps until arrival, ``max_steps`` if never) and ``outage_steps`` (per
+    robot); the env cannot see where an outer ``TimeLimit`` ends the episode, so every step carries it and the
+    last one of an episode is final.
 
     ## Starting State
 
@@ -88,9 +96,10 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     Terminates when every robot has arrived (within ``arrival_radius`` of its destination). Truncation is left
     to Gymnasium's ``TimeLimit``: the registered ids wrap the env in one of the scenario's ``mission.max_steps``
-    steps (:func:`noma_radiomap.registration.make_env`), so ``spec.max_episode_steps`` follows the scenario. The
-    end-of-mission figures (``mqi``, ...) come in the ``info`` of the step that terminates or reaches
-    ``max_steps``.
+    steps (:func:`noma_radiomap.registration.make_env`), so ``spec.max_episode_steps`` follows the scenario;
+    ``gymnasium.make(..., max_episode_steps=n)`` may end it sooner (the last ``info`` has the summary either way).
+    Stepping, rendering, ``trajectory`` or :meth:`episode_summary` before the first ``reset`` raise Gymnasium's
+    ``ResetNeeded`` ("call reset() first").
 
     ## Arguments
 
@@ -107,18 +116,25 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     - ``reward_phase``: ``"destination"``, ``"mqi"`` or ``"combined"``
     - ``inducing``: ``"euclidean"`` or ``"geodesic"`` (obstacle-aware grid distance) for ``R_i``
     - ``render_mode``: ``None``, ``"rgb_array"`` (SINR map with robots and trajectories) or ``"human"``
+    - ``observation``: ``"goal"`` (the default), ``"destinations"`` or ``"paper"`` (see Observation Space; None:
+      the task's default)
+    - ``task``: ``"missions"`` (each episode draws each robot's destination from its scenario list) or
+      ``"paper"``, the paper's task (docs/MODEL.md): each robot's first listed destination, fixed; observation
+      ``"paper"``; ``T_total`` and the episode cap 1000 steps (``NomaRadioMapPaper-v0``)
 
     ## Attributes
 
     For planners, evaluation and plots (read-only): ``scenario``, ``radio_map``, ``positions`` (U, 2),
     ``destinations`` (U, 2), ``arrived`` (U,), ``step_count``, ``trajectory`` (steps + 1, U, 2),
-    ``reward_phase``; :meth:`reward_weights`, :meth:`set_reward_phase`, :meth:`episode_summary`.
+    ``reward_phase``, ``observation``, ``task``, ``core`` (the mission engine,
+    :class:`noma_radiomap.core.MissionCore` of one mission); :meth:`reward_weights`, :meth:`set_reward_phase`,
+    :meth:`episode_summary`.
 
     ## Vector env
 
     ``gymnasium.make_vec("NomaRadioMap-v0", num_envs=N)`` steps N missions at once
-    (:class:`noma_radiomap.vector.NomaRadioMapVecEnv`, the same transitions as N single envs seeded
-    ``seed + i``); for Stable-Baselines3, ``sb3_dtdpg.vec_env.make_mission_vec_env`` (docs/SCALING.md).
+    (:class:`noma_radiomap.vector.NomaRadioMapVecEnv`, the same engine with N missions: the same transitions as N
+    single envs seeded ``seed + i``); for Stable-Baselines3, ``sb3_dtdpg.vec_env.make_mission_vec_env`` (docs/SCALING.md).
 
     ## Version History
 

@@ -92,17 +92,18 @@ class NomaRadioMapVecEnv(VectorEnv):
     ``num_envs`` missions of :class:`~noma_radiomap.NomaRadioMapEnv` stepped at once with array operations
     over (N, U): the ``vector_entry_point`` of the registered ids, so
     ``gymnasium.make_vec("NomaRadioMap-v0", num_envs=8)`` builds it. For Stable-Baselines3, use
-    :func:`sb3_dtdpg.make_mission_vec_env` (an SB3 ``VecEnv`` over the same engine).
+    :func:`sb3_dtdpg.vec_env.make_mission_vec_env` (an SB3 ``VecEnv`` over the same engine).
 
-    Observations ``(N, 6U)``, actions ``(N, 3U)``, rewards, terminations and truncations ``(N,)``: those of the
-    single env (see its docstring), truncated at ``max_episode_steps`` (default: the scenario's
+    Observations ``(N, values per robot x U)`` (the layout of ``observation``), actions ``(N, 3U)``, rewards,
+    terminations and truncations ``(N,)``: those of the single env (see its docstring), truncated at ``max_episode_steps`` (default: the scenario's
     ``mission.max_steps``, as the registered ids' ``TimeLimit``). ``reset(seed=s)`` seeds mission ``i`` with
     ``s + i`` (or takes a list of seeds), like Gymnasium's ``SyncVectorEnv``; ``options`` (``starts``,
     ``destinations``, ``reset_mask``) apply to every reset mission. Autoreset follows Gymnasium's default
     ``AutoresetMode.NEXT_STEP``: the step after an episode ends resets that mission (reward 0, its action
     ignored). ``infos`` are Gymnasium's dict of arrays with ``_key`` masks: every key of the single env's
     ``info`` (``reward_components`` a dict of (N,) arrays), and ``is_success``, ``mqi``, ``mission_time``,
-    ``outage_steps`` for the missions whose episode ends on the step.
+    ``outage_steps`` (the episode summary as of the step, as the single env gives it). Stepping or summarising a
+    mission before its first reset raises Gymnasium's ``ResetNeeded``.
 
     ``set_reward_phase(name, indices=None)``, ``reward_weights(phase=None)``, ``call(name, ...)`` and
     ``get_attr(name)`` reach every mission (:class:`MissionView`) as ``SyncVectorEnv`` reaches its envs.
@@ -112,8 +113,9 @@ class NomaRadioMapVecEnv(VectorEnv):
         ``reward_phase``, ``inducing``)
     :param max_episode_steps: truncation length (None: the scenario's ``mission.max_steps``; at most that)
     :param render_mode: only None (render a single env to see a mission)
-    :param observation: ``"paper"`` (the env's own) or ``"goal"`` (as
-        :class:`~noma_radiomap.wrappers.RelativeGoalObservation` adds it to a single env)
+    :param observation: the observation layout (:mod:`noma_radiomap.observations`; None: ``"goal"``, or
+        ``"paper"`` with ``task="paper"``)
+    :param task: ``"missions"`` or ``"paper"`` (see :class:`~noma_radiomap.NomaRadioMapEnv`)
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
