@@ -99,11 +99,11 @@ class NomaRadioMapVecEnv(VectorEnv):
     ``max_episode_steps`` (default: the scenario's ``mission.max_steps``, as the registered ids' ``TimeLimit``).
     ``reset(seed=s)`` seeds mission ``i`` with ``s + i`` (or takes a list of seeds), like Gymnasium's
     ``SyncVectorEnv``; ``options`` (``starts``, ``destinations``, ``reset_mask``) apply to every reset mission.
-    Autoreset follows Gymnasium's default ``AutoresetMode.NEXT_STEP``: the step after an episode ends resets
-    that mission (reward 0, its action ignored). ``infos`` are Gymnasium's dict of arrays with ``_key`` masks: every key of the single env's
-    ``info`` (``reward_components`` a dict of (N,) arrays), and ``is_success``, ``mqi``, ``mission_time``,
-    ``outage_steps`` (the episode summary as of the step, as the single env gives it). Stepping or summarising a
-    mission before its first reset raises Gymnasium's ``ResetNeeded``.
+    Autoreset follows Gymnasium's default ``AutoresetMode.NEXT_STEP``: the step after an episode ends resets that
+    mission (reward 0, its action ignored). ``infos`` are Gymnasium's dict of arrays with ``_key`` masks: every key
+    of the single env's ``info`` (``reward_components`` a dict of (N,) arrays), and ``is_success``, ``mqi``,
+    ``mission_time``, ``outage_steps`` (the episode summary as of the step, as the single env gives it). Stepping or
+    summarising a mission before its first reset raises Gymnasium's ``ResetNeeded``.
 
     ``set_reward_phase(name, indices=None)``, ``reward_weights(phase=None)``, ``call(name, ...)`` and
     ``get_attr(name)`` reach every mission (:class:`MissionView`) as ``SyncVectorEnv`` reaches its envs.
