@@ -23,6 +23,7 @@ from noma_radiomap.motion import GridMotion
 from noma_radiomap.observations import DEFAULT_OBSERVATION, GAIN_DB_RANGE, Observer, check_observation
 from noma_radiomap.propagation import dbm_to_watt, linear_to_db, rayleigh_fading
 from noma_radiomap.radiomap import RadioMap
+from noma_radiomap.sampling import MissionSampler
 from noma_radiomap.scenario import Scenario, load_scenario
 
 CHANNELS: tuple[str, ...] = ("radio_map", "rayleigh")
@@ -62,29 +63,21 @@ class MissionStep:
     """The episode summaries as of the step (:meth:`MissionCore.episode_summaries`)."""
 
     def info(self, k: int) -> dict[str, Any]:
-        """The ``info`` of the ``k``-th stepped mission: :data:`INFO_KEYS`, ``reward_components`` and the episode
+        """The ``info`` of the ``k``-th stepped mission: ``reward_components``, :data:`INFO_KEYS` and the episode
         summary as of the step (:data:`SUMMARY_KEYS`)."""
-        return {
-            "reward_components": {name: float(value[k]) for name, value in self.components.items()},
-            "rate_bps": self.rate_bps[k],
-            "sinr_db": self.sinr_db[k],
-            "outage": self.outage[k],
-            "power_w": self.power_w[k],
-            "gain_db": self.gain_db[k],
-            "decoding_order": self.decoding_order[k],
-            **summary_row(self.summary, k),
-        }
+        info: dict[str, Any] = {"reward_components": {name: float(value[k]) for name, value in self.components.items()}}
+        for key in INFO_KEYS:
+            info[key] = getattr(self, key)[k]
+        info.update(summary_row(self.summary, k))
+        return info
 
 
 def summary_row(summaries: dict[str, np.ndarray], j: int) -> dict[str, Any]:
     """The episode summary of the ``j``-th row of :meth:`MissionCore.episode_summaries`, as one mission's ``info``
-    holds it (``is_success`` a bool, ``mqi`` a float, per-robot arrays for the rest)."""
-    return {
-        "is_success": bool(summaries["is_success"][j]),
-        "mqi": float(summaries["mqi"][j]),
-        "mission_time": summaries["mission_time"][j],
-        "outage_steps": summaries["outage_steps"][j],
-    }
+    holds it: ``is_success`` a bool, ``mqi`` a float, per-robot arrays for the others."""
+    values = [summaries[key][j] for key in SUMMARY_KEYS]
+    values[0], values[1] = bool(values[0]), float(values[1])  # is_success, mqi: the order of SUMMARY_KEYS
+    return dict(zip(SUMMARY_KEYS, values, strict=True))
 
 
 def load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
@@ -154,7 +147,6 @@ class MissionCore:
             arrival_radius=sc.robot.arrival_radius,
         )
         self.observe = Observer(observation, (sc.room.width, sc.room.depth), GAIN_DB_RANGE)
-        self._components = geometry.free_components(self.radio_map.blocked)
         # One row per cell (flat index ix * ny + iy), one column per transmitter (AP first): a single gather per
         # step. The radio-map channel has the expected fading folded in; the Rayleigh channel draws it.
         gains = self.radio_map.gain if channel == "radio_map" else self.radio_map.path_gain
@@ -171,7 +163,8 @@ class MissionCore:
             success_reward=mission.success_reward,
         )
         self._d_max = sc.room.d_max
-        self._mission_choices = self._setup_missions()
+        #: Draws the starts and destinations of a reset (:class:`noma_radiomap.sampling.MissionSampler`)
+        self.sampler = MissionSampler(sc, self.radio_map, self.motion, fixed_destinations=task == "paper")
 
         n, u = int(num_missions), self.n_robots
         self.num_missions = n
@@ -192,26 +185,6 @@ class MissionCore:
         self._was_reset = np.zeros(n, dtype=bool)
         self._all_reset = False
         self._all_rows = np.arange(n)
-
-    def _setup_missions(self) -> list[list[tuple[np.ndarray, np.ndarray]]]:
-        """Per robot, its destinations (the first only in the paper's task) and the free start cells not already
-        at each of them."""
-        sc = self.scenario
-        missions = []
-        for u, robot in enumerate(sc.robots):
-            centres = (self.radio_map.start_cells(u) + 0.5) * sc.room.resolution
-            choices = []
-            for destination in robot.destinations[:1] if self.task == "paper" else robot.destinations:
-                goal = np.asarray(destination, dtype=np.float64)
-                far = np.hypot(*(centres - goal).T) > sc.robot.arrival_radius
-                if not far.any():
-                    raise ValueError(
-                        f"robots[{u}].start: every free cell of {list(robot.start)} is within arrival_radius of "
-                        f"destination {list(destination)}"
-                    )
-                choices.append((goal, centres[far]))
-            missions.append(choices)
-        return missions
 
     # --- reward phases -----------------------------------------------------------------------------
     def set_reward_phase(self, name: str, rows: list[int]) -> None:
@@ -249,7 +222,7 @@ class MissionCore:
             elif seeds is not None and seeds[k] is not None:
                 self.np_randoms[i] = seeding.np_random(seeds[k])[0]
             row_options = options[k] if isinstance(options, list) else options
-            self.positions[i], self.destinations[i] = self.draw_mission(row_options, self.np_randoms[i])
+            self.positions[i], self.destinations[i] = self.sampler.draw(row_options, self.np_randoms[i])
         self.arrived[rows] = False
         self.step_counts[rows] = 0
         self.arrival_steps[rows] = self.max_steps
@@ -372,78 +345,6 @@ class MissionCore:
             arrived, self.arrival_steps[rows], self.outage_steps[rows], self.max_steps, mission.t_total, mission.outage_penalty
         )
         return {"is_success": success, "mqi": mqi, "mission_time": mission_time, "outage_steps": outage_steps}
-
-    # --- missions ----------------------------------------------------------------------------------
-    def draw_mission(self, options: dict[str, Any] | None, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """
-        Starts and destinations (U, 2) each: drawn from the scenario with ``rng``, or given in the reset options.
-
-        :param options: the reset options
-        :param rng: the mission's generator
-        """
-        options = {} if options is None else dict(options)
-        unknown = set(options) - {"starts", "destinations"}
-        if unknown:
-            raise ValueError(f"options: unknown keys {sorted(unknown)}, expected 'starts' and/or 'destinations'")
-        destinations = self._option_points(options, "destinations")
-        starts = self._option_points(options, "starts")
-        if destinations is None:
-            destinations = np.empty((self.n_robots, 2))
-            for u, choices in enumerate(self._mission_choices):
-                destinations[u] = choices[rng.integers(len(choices))][0]
-        if starts is None:
-            starts = np.empty((self.n_robots, 2))
-            for u, choices in enumerate(self._mission_choices):
-                candidates = self._start_candidates(u, destinations[u], choices)
-                starts[u] = candidates[rng.integers(len(candidates))]
-        self._check_mission(starts, destinations)
-        return starts, destinations
-
-    def _start_candidates(self, u: int, destination: np.ndarray, choices: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
-        for goal, candidates in choices:
-            if np.array_equal(goal, destination):
-                return candidates
-        # A destination given through the options: any free start cell farther than arrival_radius.
-        all_cells = np.concatenate([c for _, c in choices])
-        far = np.hypot(*(all_cells - destination).T) > self.scenario.robot.arrival_radius
-        if not far.any():
-            raise ValueError(
-                f"options['destinations'][{u}]: {destination.tolist()} is within arrival_radius of every start cell"
-            )
-        return all_cells[far]
-
-    def _option_points(self, options: dict[str, Any], key: str) -> np.ndarray | None:
-        if key not in options or options[key] is None:
-            return None
-        try:
-            points = np.array(options[key], dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"options[{key!r}]: expected {self.n_robots} points [x, y], got {options[key]!r}") from None
-        if points.shape != (self.n_robots, 2) or not np.isfinite(points).all():
-            raise ValueError(
-                f"options[{key!r}]: expected {self.n_robots} finite points [x, y] (shape ({self.n_robots}, 2)), "
-                f"got {options[key]!r}"
-            )
-        free = self.motion.is_free(points)
-        if not free.all():
-            u = int(np.flatnonzero(~free)[0])
-            raise ValueError(f"options[{key!r}][{u}]: {points[u].tolist()} is outside the room or in a blocked cell")
-        return points
-
-    def _check_mission(self, starts: np.ndarray, destinations: np.ndarray) -> None:
-        start_labels = self._components[self.scenario.room.cell_index(starts)]
-        goal_labels = self._components[self.scenario.room.cell_index(destinations)]
-        for u in range(self.n_robots):
-            if start_labels[u] != goal_labels[u]:
-                raise ValueError(
-                    f"options: destination {destinations[u].tolist()} of robot {u} is unreachable from its start "
-                    f"{starts[u].tolist()}"
-                )
-            if np.hypot(*(starts[u] - destinations[u])) <= self.scenario.robot.arrival_radius:
-                raise ValueError(
-                    f"options: start {starts[u].tolist()} of robot {u} is already within arrival_radius "
-                    f"({self.scenario.robot.arrival_radius} m) of its destination {destinations[u].tolist()}"
-                )
 
 
 _NO_FADING = np.zeros((0, 0, 0))
