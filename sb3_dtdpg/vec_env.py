@@ -111,7 +111,7 @@ def step_infos(result: MissionStep) -> list[dict[str, Any]]:
     :return: one dict per stepped mission, in row order
     """
     time_limit = (result.truncated & ~result.terminated).tolist()
-    infos = [result.info(k) for k in range(len(result.rows))]
+    infos = result.infos()
     for info, truncated in zip(infos, time_limit, strict=True):
         info["TimeLimit.truncated"] = truncated
     return infos

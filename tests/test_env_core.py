@@ -137,3 +137,19 @@ def test_vector_envs_before_reset_raise_reset_needed():
     vec.reset(seed=0)
     _, rewards, _, _, infos = vec.step(np.zeros((2, 6)))
     assert rewards.shape == (2,) and infos["_mqi"].all()
+
+
+def test_infos_of_a_batch_are_the_info_of_each_mission():
+    from noma_radiomap.core import INFO_KEYS, MissionCore
+
+    core = MissionCore(5, "small", channel="rayleigh")
+    core.reset(np.arange(5), list(range(5)))
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        result = core.step(rng.uniform(-1, 1, (5, 2, 3)), slice(None))
+        for k, batched in enumerate(result.infos()):
+            single = result.info(k)
+            assert list(batched) == list(single) == ["reward_components", *INFO_KEYS, *SUMMARY_KEYS]
+            for key, value in single.items():
+                assert type(batched[key]) is type(value)
+                np.testing.assert_equal(batched[key], value)

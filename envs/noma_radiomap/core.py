@@ -41,6 +41,9 @@ INFO_KEYS: tuple[str, ...] = ("rate_bps", "sinr_db", "outage", "power_w", "gain_
 #: where an outer ``TimeLimit`` ends an episode, and its last ``info`` must have it.
 SUMMARY_KEYS: tuple[str, ...] = ("is_success", "mqi", "mission_time", "outage_steps")
 RESET_FIRST = "call reset() first"
+#: The summary values that are one Python scalar per mission in an ``info``, and their type
+_SCALAR_SUMMARIES: dict[str, type] = {"is_success": bool, "mqi": float}
+_INFO_ROW_KEYS = ("reward_components", *INFO_KEYS, *SUMMARY_KEYS)
 _ALL = slice(None)
 
 
@@ -71,13 +74,30 @@ class MissionStep:
         info.update(summary_row(self.summary, k))
         return info
 
+    def infos(self) -> list[dict[str, Any]]:
+        """:meth:`info` of every stepped mission, in row order (built column by column: faster for many missions)."""
+        names = tuple(self.components)
+        columns = [
+            [
+                dict(zip(names, values, strict=True))
+                for values in zip(*(value.tolist() for value in self.components.values()), strict=True)
+            ]
+        ]
+        columns += [list(getattr(self, key)) for key in INFO_KEYS]
+        columns += [
+            self.summary[key].tolist() if key in _SCALAR_SUMMARIES else list(self.summary[key]) for key in SUMMARY_KEYS
+        ]
+        return [dict(zip(_INFO_ROW_KEYS, row, strict=True)) for row in zip(*columns, strict=True)]
+
 
 def summary_row(summaries: dict[str, np.ndarray], j: int) -> dict[str, Any]:
     """The episode summary of the ``j``-th row of :meth:`MissionCore.episode_summaries`, as one mission's ``info``
     holds it: ``is_success`` a bool, ``mqi`` a float, per-robot arrays for the others."""
-    values = [summaries[key][j] for key in SUMMARY_KEYS]
-    values[0], values[1] = bool(values[0]), float(values[1])  # is_success, mqi: the order of SUMMARY_KEYS
-    return dict(zip(SUMMARY_KEYS, values, strict=True))
+    return {key: _SCALAR_SUMMARIES.get(key, _same)(summaries[key][j]) for key in SUMMARY_KEYS}
+
+
+def _same(value: Any) -> Any:
+    return value
 
 
 def load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
