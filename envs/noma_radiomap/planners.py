@@ -507,6 +507,15 @@ class _PathFollower(GridPlanner):
     def extra_cost(self, env: Any) -> np.ndarray | None:
         return self._given_extra
 
+    def _clear(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """Whether the straight segment stays in free cells (sampled every 1/8 cell): a quicker test than the
+        base class's, for a candidate only (its rollout uses the env's motion model all the same)."""
+        if self._given_extra is None:  # the shortest path: exactly the ShortestPathPlanner's following
+            return super()._clear(start, end)
+        n = max(2, int(np.ceil(8.0 * np.linalg.norm(end - start) / self._motion.resolution)) + 1)
+        points = start + np.linspace(0.0, 1.0, n)[:, None] * (end - start)
+        return bool(self._motion.is_free(points).all())
+
 
 class _Shim:
     """The state a :class:`GridPlanner` reads from an env, for rolling a candidate path out without the env."""
