@@ -532,15 +532,19 @@ class ReferencePlanner:
 
     Candidates per robot: the paths of :class:`GridPlanner` (followed at full speed, the same path following)
     for the path costs ``1 + w lambda o(cell)`` per metre, with ``o`` the robot-alone outage at ``P_max`` or
-    the need of more than the equal share ``P_max / U`` (:func:`single_outage_maps`) and ``w`` in ``weights``,
-    plus the shortest path (``w = 0``). Each distinct candidate is rolled out once with the env's motion model;
-    every combination of one candidate per robot is then scored exactly (``sum_u T_u + lambda x outage`` with
-    the robots coupled through the power split, step by step) and the best is followed. The shortest paths with
+    the need of more than the equal share ``P_max / U`` (:func:`single_outage_maps`, in NOMA and in OMA: the
+    same candidates in both modes) and ``w`` in ``weights``, plus the shortest path (``w = 0``). Each distinct
+    candidate is rolled out once with the env's motion model; every combination of one candidate per robot is
+    then scored exactly (``sum_u T_u + lambda x outage`` with the robots coupled through the power split, step
+    by step) and the best is followed. The shortest paths with
     the best power are one of the combinations (ties go to them), so on the radio-map channel the planner never
-    scores below :class:`ShortestPathPlanner` with ``power="best"``. Motion does not depend on the fading, so
-    with the Rayleigh channel the same plan is followed (the power split planned on the expected channel).
+    scores below :class:`ShortestPathPlanner` with ``power="best"``.
 
-    Plans are cached per scenario, mode and mission (starts, destinations).
+    With the Rayleigh channel (motion does not depend on the fading, so the rollouts are the same) the
+    combinations are scored, and the power split chosen, by the expected number of outages under fading
+    (:func:`best_power`). Candidate rollouts are cached per scenario and mission (starts,
+    destinations), plans per mode and channel too: one instance evaluated on several modes and channels rolls
+    every candidate out once.
 
     :param weights: the outage weights ``w`` of the candidate paths
     :param lookahead: how many path points ahead a robot may aim at
