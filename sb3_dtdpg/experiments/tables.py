@@ -267,13 +267,13 @@ def table_notes(summary: pd.DataFrame) -> list[str]:
     ]
     if "mqi_of_best" in summary:
         notes.append(
-            "MQI / best planner, MQI / shortest path: the test MQI over that planner's in the same mode (best planner: a "
-            "joint search over candidate paths with the exact power split; shortest-path planner: the shortest paths "
-            "with the best power split per step)"
+            "of best, of shortest: the test MQI over the best planner's and over the shortest-path planner's in the same "
+            "mode (best planner: a joint search over candidate paths with the best power split per step; shortest-path "
+            "planner: the shortest paths with the best power split per step)"
         )
     if "mqi_bound" in summary:
         notes.append(
-            "MQI bound (gap): an upper bound on the MQI of any policy on these missions with the radio-map channel "
+            "Bound (gap): an upper bound on the MQI of any policy on these missions with the radio-map channel "
             "(each robot alone with the whole AP power), and the bound minus the row's MQI"
         )
     scales = _scales(summary)
@@ -310,9 +310,9 @@ def _display(summary: pd.DataFrame, columns: Sequence[str]) -> tuple[list[str], 
     ]
     fractions = "mqi_of_best" in summary and "mqi_of_shortest" in summary
     if fractions:
-        header += ["MQI / best planner", "MQI / shortest path"]
+        header += ["of best", "of shortest"]
     if "mqi_bound" in summary:
-        header.append("MQI bound (gap)")
+        header.append("Bound (gap)")
     if "paper_mqi" in summary:
         header.append(f"Paper MQI (mall, of {PAPER_MQI_SCALE:g})")
     body = []
