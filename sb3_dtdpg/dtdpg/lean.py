@@ -1,0 +1,241 @@
+"""
+Lean training step and acting path of DT-DPG: the same math as SB3's TD3/DDPG ``train()`` and
+``_sample_action()``, in fewer Python-level operations.
+
+Every floating-point operation, every draw of the random generators and every Adam update of SB3's generic path
+happens here too, in the same order, so the parameters, batch-norm statistics and optimizer states are
+bit-identical to it (``tests/test_lean_step.py``). What is left out is work that changes no number: gradients of
+the critic's weights in the actor loss (:func:`torch.autograd.grad` with respect to the actor's parameters only),
+the per-call bookkeeping of ``Optimizer.step`` (the fused Adam kernel is applied to the optimizer's own state),
+one in-place kernel per tensor in the Polyak updates (``torch._foreach_*``), and the checks and copies of
+``predict`` when acting.
+"""
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.preprocessing import is_image_space
+from torch.nn import functional as F
+
+#: Name of the model attribute holding the lean path's caches (excluded from saving).
+CACHE_ATTRIBUTE = "_lean_cache"
+
+
+class FusedAdamStep:
+    """
+    One fused Adam step applied to a ``torch.optim.Adam(fused=True)`` optimizer's own state (its ``step``,
+    ``exp_avg`` and ``exp_avg_sq`` tensors), given the gradients: the kernel ``Adam.step`` runs, without its
+    per-call bookkeeping. Any other optimizer (or set-up: several parameter groups, AMSGrad, hooks, a state not
+    yet created) goes through ``optimizer.step()`` with the gradients set on the parameters.
+
+    :param optimizer: The optimizer whose parameters and state are updated
+    """
+
+    def __init__(self, optimizer: th.optim.Optimizer):
+        self.optimizer = optimizer
+        self.params: list[th.Tensor] = [p for group in optimizer.param_groups for p in group["params"]]
+        self._state: Any = None
+        self._tensors: tuple[list[th.Tensor], list[th.Tensor], list[th.Tensor]] | None = None
+
+    def _fusable(self) -> bool:
+        optimizer = self.optimizer
+        if type(optimizer) is not th.optim.Adam or len(optimizer.param_groups) != 1:
+            return False
+        group = optimizer.param_groups[0]
+        if not group.get("fused") or group.get("amsgrad") or group.get("capturable") or group.get("differentiable"):
+            return False
+        if group.get("decoupled_weight_decay") or getattr(optimizer, "grad_scale", None) is not None:
+            return False
+        if optimizer._optimizer_step_pre_hooks or optimizer._optimizer_step_post_hooks:
+            return False
+        from torch.optim import optimizer as optimizer_module
+
+        if optimizer_module._global_optimizer_pre_hooks or optimizer_module._global_optimizer_post_hooks:
+            return False
+        return all(p in optimizer.state and "exp_avg" in optimizer.state[p] for p in self.params)
+
+    def _state_tensors(self) -> tuple[list[th.Tensor], list[th.Tensor], list[th.Tensor]] | None:
+        # load_state_dict() replaces optimizer.state: the cached tensors are those of the current state object
+        if self._state is not self.optimizer.state or self._tensors is None:
+            if not self._fusable():
+                return None
+            state = self.optimizer.state
+            self._tensors = (
+                [state[p]["exp_avg"] for p in self.params],
+                [state[p]["exp_avg_sq"] for p in self.params],
+                [state[p]["step"] for p in self.params],
+            )
+            self._state = state
+        return self._tensors
+
+    def step(self, grads: tuple[th.Tensor | None, ...]) -> None:
+        """
+        Update the parameters with their gradients.
+
+        :param grads: One gradient per parameter, in the order of the optimizer's parameters (None: unused)
+        """
+        tensors = self._state_tensors() if all(g is not None for g in grads) else None
+        if tensors is None:
+            self.optimizer.zero_grad()
+            for param, grad in zip(self.params, grads, strict=True):
+                param.grad = grad
+            self.optimizer.step()
+            self._tensors = None  # the first step creates the state
+            return
+        exp_avgs, exp_avg_sqs, steps = tensors
+        group = self.optimizer.param_groups[0]
+        beta1, beta2 = group["betas"]
+        with th.no_grad():
+            th._foreach_add_(steps, 1)
+            th._fused_adam_(
+                self.params,
+                list(grads),  # type: ignore[arg-type]
+                exp_avgs,
+                exp_avg_sqs,
+                [],
+                steps,
+                amsgrad=False,
+                lr=group["lr"],
+                beta1=beta1,
+                beta2=beta2,
+                weight_decay=group["weight_decay"],
+                eps=group["eps"],
+                maximize=group["maximize"],
+                grad_scale=None,
+                found_inf=None,
+            )
+
+
+class LeanTrainer:
+    """
+    The tensors and helpers one model's lean step needs, built once per set of networks and optimizers (a new
+    policy, from ``_setup_model`` or ``load``, or a loaded optimizer state, makes a new one).
+
+    :param model: A TD3/DDPG model (``actor``, ``critic``, their targets and optimizers, batch-norm statistics)
+    """
+
+    def __init__(self, model: Any):
+        self.owners = self._owners(model)
+        self.actor_params = list(model.actor.parameters())
+        self.critic_params = list(model.critic.parameters())
+        self.actor_adam = FusedAdamStep(model.actor.optimizer)
+        self.critic_adam = FusedAdamStep(model.critic.optimizer)
+        if self.actor_adam.params != self.actor_params or self.critic_adam.params != self.critic_params:
+            raise ValueError("the lean training step needs optimizers over exactly the actor's and the critic's parameters")
+        # SB3 Polyak-updates critic, actor (tau), then copies the batch-norm statistics (tau = 1): one list each
+        self.online = [*self.critic_params, *self.actor_params]
+        self.target = [*model.critic_target.parameters(), *model.actor_target.parameters()]
+        self.stats = [*model.critic_batch_norm_stats, *model.actor_batch_norm_stats]
+        self.target_stats = [*model.critic_batch_norm_stats_target, *model.actor_batch_norm_stats_target]
+        if len(self.online) != len(self.target) or len(self.stats) != len(self.target_stats):
+            raise ValueError("the target networks do not match the online networks")
+
+    @staticmethod
+    def _owners(model: Any) -> tuple[Any, ...]:
+        return (model.policy, model.actor, model.critic, model.actor_target, model.critic_target)
+
+    def valid_for(self, model: Any) -> bool:
+        """:return: whether this cache was built for the model's current networks"""
+        return all(a is b for a, b in zip(self.owners, self._owners(model), strict=True))
+
+    def polyak(self, tau: float) -> None:
+        """SB3's ``polyak_update`` of the targets (``target = (1 - tau) * target + tau * online``), and the copy of the
+        batch-norm statistics (the same update with ``tau = 1``), one kernel per tensor."""
+        with th.no_grad():
+            th._foreach_mul_(self.target, 1 - tau)
+            th._foreach_add_(self.target, self.online, alpha=tau)
+            if self.stats:
+                th._foreach_mul_(self.target_stats, 0.0)
+                th._foreach_add_(self.target_stats, self.stats, alpha=1.0)
+
+
+def lean_trainer(model: Any) -> LeanTrainer:
+    """:return: the model's :class:`LeanTrainer`, built anew when its networks changed"""
+    trainer = getattr(model, CACHE_ATTRIBUTE, None)
+    if trainer is None or not trainer.valid_for(model):
+        trainer = LeanTrainer(model)
+        setattr(model, CACHE_ATTRIBUTE, trainer)
+    return trainer
+
+
+def lean_train(model: Any, gradient_steps: int, batch_size: int) -> None:
+    """
+    SB3's TD3 ``train()`` (DDPG: TD3 with one critic, no target noise and no policy delay), the same math in
+    fewer operations (see the module docstring).
+
+    :param model: The TD3/DDPG model
+    :param gradient_steps: Number of gradient steps
+    :param batch_size: Minibatch size
+    """
+    trainer = lean_trainer(model)
+    model.policy.set_training_mode(True)
+    model._update_learning_rate([model.actor.optimizer, model.critic.optimizer])
+    actor, critic, actor_target, critic_target = model.actor, model.critic, model.actor_target, model.critic_target
+    single_critic = critic.n_critics == 1
+    actor_losses, critic_losses = [], []
+    for _ in range(gradient_steps):
+        model._n_updates += 1
+        data = model.replay_buffer.sample(batch_size, env=model._vec_normalize_env)
+        discounts = data.discounts if data.discounts is not None else model.gamma
+        with th.no_grad():
+            # The target noise is drawn as SB3 draws it (also when its scale is 0): the torch generator's stream
+            # stays the same
+            noise = th.empty_like(data.actions).normal_(0, model.target_policy_noise)
+            noise = noise.clamp(-model.target_noise_clip, model.target_noise_clip)
+            next_actions = (actor_target(data.next_observations) + noise).clamp(-1, 1)
+            next_q = critic_target(data.next_observations, next_actions)
+            next_q_values = next_q[0] if single_critic else th.cat(next_q, dim=1).min(dim=1, keepdim=True)[0]
+            target_q_values = data.rewards + (1 - data.dones) * discounts * next_q_values
+        current_q_values = critic(data.observations, data.actions)
+        if single_critic:
+            critic_loss = F.mse_loss(current_q_values[0], target_q_values)
+        else:
+            critic_loss = sum(F.mse_loss(current_q, target_q_values) for current_q in current_q_values)
+        critic_losses.append(critic_loss.item())
+        trainer.critic_adam.step(th.autograd.grad(critic_loss, trainer.critic_params))
+
+        if model._n_updates % model.policy_delay == 0:
+            actor_loss = -critic.q1_forward(data.observations, actor(data.observations)).mean()
+            actor_losses.append(actor_loss.item())
+            trainer.actor_adam.step(th.autograd.grad(actor_loss, trainer.actor_params))
+            trainer.polyak(model.tau)
+
+    model.logger.record("train/n_updates", model._n_updates, exclude="tensorboard")
+    if len(actor_losses) > 0:
+        model.logger.record("train/actor_loss", np.mean(actor_losses))
+    model.logger.record("train/critic_loss", np.mean(critic_losses))
+
+
+def fast_actable(observation_space: spaces.Space) -> bool:
+    """:return: whether :func:`policy_action` can act on observations of this space (vector or dict of vectors)"""
+    if isinstance(observation_space, spaces.Dict):
+        return all(isinstance(s, spaces.Box) and not is_image_space(s) for s in observation_space.spaces.values())
+    return isinstance(observation_space, spaces.Box) and not is_image_space(observation_space)
+
+
+def policy_action(model: Any, observation: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+    """
+    The actions ``model.predict(observation, deterministic=False)`` returns for a vectorized observation of a
+    :func:`fast_actable` space, computed without its checks and copies (under ``inference_mode``); the policy must
+    be in evaluation mode, as it is while SB3 collects rollouts.
+
+    :param model: The TD3/DDPG model
+    :param observation: The vectorized observation (one row per env)
+    :return: The actions, in the action space's bounds, one row per env
+    """
+    policy = model.policy
+    device = policy.device
+    if isinstance(observation, dict):
+        obs: th.Tensor | dict[str, th.Tensor] = {key: th.as_tensor(value, device=device) for key, value in observation.items()}
+    else:
+        obs = th.as_tensor(observation, device=device)
+    with th.inference_mode():
+        actions = model.actor(obs)
+    actions = actions.cpu().numpy().reshape((-1, *model.action_space.shape))
+    return (
+        policy.unscale_action(actions)
+        if policy.squash_output
+        else np.clip(actions, model.action_space.low, model.action_space.high)
+    )
