@@ -9,11 +9,13 @@ import torch as th
 from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
 from phased_env import PhasedPointEnv
+from stable_baselines3 import DDPG, TD3
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.noise import NormalActionNoise
 from stable_baselines3.common.save_util import load_from_zip_file
 
 from sb3_dtdpg import DTDPG, Phase
-from sb3_dtdpg.dtdpg.lean import CACHE_ATTRIBUTE, policy_action
+from sb3_dtdpg.dtdpg.lean import CACHE_ATTRIBUTE, LeanDDPG, LeanTD3, policy_action
 
 
 class DictObservation(gym.ObservationWrapper):
@@ -190,3 +192,48 @@ def test_lean_caches_are_not_saved(tmp_path: Path) -> None:
     assert getattr(loaded, CACHE_ATTRIBUTE, None) is None
     loaded.learn(10, reset_num_timesteps=False)  # builds its caches for the loaded networks
     assert getattr(loaded, CACHE_ATTRIBUTE).valid_for(loaded)
+
+
+@pytest.mark.filterwarnings("ignore:`n_steps=3` is ignored")  # SB3's load() of its own n-step DDPG
+@pytest.mark.parametrize(
+    ("lean_class", "sb3_class", "kwargs", "optimizer_kwargs"),
+    [
+        # DDPG with SB3's default Adam, 3-step returns and 2 gradient steps; TD3 with the fused Adam kernel, its
+        # target noise, two critics and delayed policy updates
+        (LeanDDPG, DDPG, dict(n_steps=3, gradient_steps=2), None),
+        (LeanTD3, TD3, dict(policy_delay=2), dict(fused=True)),
+    ],
+)
+def test_lean_ddpg_and_td3_are_bit_identical_to_sb3(
+    lean_class: type, sb3_class: type, kwargs: dict, optimizer_kwargs: dict | None, tmp_path: Path
+) -> None:
+    policy_kwargs = dict(net_arch=[32, 32], optimizer_kwargs=optimizer_kwargs)
+    models = []
+    for cls in (sb3_class, lean_class):
+        env = make_vec_env(_point_env, n_envs=1, seed=0)
+        n_actions = env.action_space.shape[0]
+        noise = NormalActionNoise(np.zeros(n_actions), 0.3 * np.ones(n_actions))
+        model = cls(
+            "MlpPolicy",
+            env,
+            learning_starts=40,
+            batch_size=16,
+            action_noise=noise,
+            policy_kwargs=policy_kwargs,
+            seed=0,
+            **kwargs,
+        )
+        model.learn(120)
+        model.save(tmp_path / cls.__name__)
+        model.save_replay_buffer(tmp_path / f"{cls.__name__}_buffer")
+        loaded = cls.load(tmp_path / cls.__name__, env=make_vec_env(_point_env, n_envs=1, seed=1))
+        loaded.load_replay_buffer(tmp_path / f"{cls.__name__}_buffer")
+        loaded.set_random_seed(1)
+        loaded.learn(100, reset_num_timesteps=False)
+        models.append(loaded)
+    reference, lean = models
+    assert getattr(lean, CACHE_ATTRIBUTE).valid_for(lean) and getattr(reference, CACHE_ATTRIBUTE, None) is None
+    assert lean._n_updates == reference._n_updates > 100
+    _assert_same_tensors(lean.policy.state_dict(), reference.policy.state_dict(), "policy")
+    _assert_same_tensors(lean.actor.optimizer.state_dict(), reference.actor.optimizer.state_dict(), "actor.optimizer")
+    _assert_same_tensors(lean.critic.optimizer.state_dict(), reference.critic.optimizer.state_dict(), "critic.optimizer")

@@ -3,7 +3,6 @@ import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
-import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3 import DDPG
@@ -17,14 +16,14 @@ from sb3_dtdpg.common.buffers import reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
 from sb3_dtdpg.common.noise import decaying_noise
 from sb3_dtdpg.common.phases import Phase, parse_phases
-from sb3_dtdpg.dtdpg.lean import CACHE_ATTRIBUTE, fast_actable, lean_train, policy_action
+from sb3_dtdpg.dtdpg.lean import LeanStep
 from sb3_dtdpg.dtdpg.policies import CnnPolicy, DTDPGPolicy, MlpPolicy, MultiInputPolicy
 from sb3_dtdpg.missions import MissionLoggerCallback, default_curriculum
 
 SelfDTDPG = TypeVar("SelfDTDPG", bound="DTDPG")
 
 
-class DTDPG(DDPG):
+class DTDPG(LeanStep, DDPG):
     """
     Deep Transfer Deterministic Policy Gradient (DT-DPG).
 
@@ -198,32 +197,6 @@ class DTDPG(DDPG):
                 # returns are set up, so the warning would be wrong here
                 warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored", category=UserWarning)
             super()._setup_model()
-
-    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
-        if not self.lean:
-            super().train(gradient_steps, batch_size)
-            return
-        lean_train(self, gradient_steps, batch_size)
-
-    def _sample_action(
-        self,
-        learning_starts: int,
-        action_noise: ActionNoise | None = None,
-        n_envs: int = 1,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        warmup = self.num_timesteps < learning_starts
-        if not self.lean or warmup or not fast_actable(self.observation_space):
-            return super()._sample_action(learning_starts, action_noise, n_envs)
-        assert self._last_obs is not None, "self._last_obs was not set"
-        self.policy.set_training_mode(False)  # a no-op while collecting rollouts
-        # What SB3 does after predict(): rescale to [-1, 1], add the noise, store the scaled action
-        scaled_action = self.policy.scale_action(policy_action(self, self._last_obs))
-        if action_noise is not None:
-            scaled_action = np.clip(scaled_action + action_noise(), -1, 1)
-        return self.policy.unscale_action(scaled_action), scaled_action
-
-    def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), CACHE_ATTRIBUTE]
 
     def reinitialize(self) -> None:
         """
