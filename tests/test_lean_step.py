@@ -11,6 +11,7 @@ from gymnasium.wrappers import TimeLimit
 from phased_env import PhasedPointEnv
 from stable_baselines3 import DDPG, TD3
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.envs import FakeImageEnv
 from stable_baselines3.common.noise import NormalActionNoise
 from stable_baselines3.common.save_util import load_from_zip_file
 
@@ -237,3 +238,34 @@ def test_lean_ddpg_and_td3_are_bit_identical_to_sb3(
     _assert_same_tensors(lean.policy.state_dict(), reference.policy.state_dict(), "policy")
     _assert_same_tensors(lean.actor.optimizer.state_dict(), reference.actor.optimizer.state_dict(), "actor.optimizer")
     _assert_same_tensors(lean.critic.optimizer.state_dict(), reference.critic.optimizer.state_dict(), "critic.optimizer")
+
+
+@pytest.mark.parametrize("share_features_extractor", [False, True])
+def test_lean_step_with_a_cnn_is_bit_identical(share_features_extractor: bool) -> None:
+    # Images act through predict(); a features extractor shared with the actor gets no critic gradient
+    policy_kwargs = dict(
+        net_arch=[16], features_extractor_kwargs=dict(features_dim=16), share_features_extractor=share_features_extractor
+    )
+    models = []
+    for lean in (False, True):
+        env = FakeImageEnv(screen_height=36, screen_width=36, n_channels=1, discrete=False)
+        env.observation_space.seed(0)  # its observations are samples of its space
+        model = DTDPG(
+            "CnnPolicy",
+            env,
+            buffer_size=200,
+            learning_starts=40,
+            batch_size=8,
+            train_freq=4,
+            gradient_steps=2,
+            policy_kwargs=policy_kwargs,
+            seed=2,
+            lean=lean,
+        )
+        model.learn(80)
+        models.append(model)
+    reference, lean_model = models
+    assert lean_model._n_updates == reference._n_updates > 0
+    _assert_same_tensors(lean_model.policy.state_dict(), reference.policy.state_dict(), "policy")
+    _assert_same_tensors(lean_model.actor.optimizer.state_dict(), reference.actor.optimizer.state_dict(), "actor.optimizer")
+    _assert_same_tensors(lean_model.critic.optimizer.state_dict(), reference.critic.optimizer.state_dict(), "critic.optimizer")

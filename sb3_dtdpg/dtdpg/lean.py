@@ -120,19 +120,32 @@ class LeanTrainer:
 
     def __init__(self, model: Any):
         self.owners = self._owners(model)
-        self.actor_params = list(model.actor.parameters())
-        self.critic_params = list(model.critic.parameters())
         self.actor_adam = FusedAdamStep(model.actor.optimizer)
         self.critic_adam = FusedAdamStep(model.critic.optimizer)
-        if self.actor_adam.params != self.actor_params or self.critic_adam.params != self.critic_params:
-            raise ValueError("the lean training step needs optimizers over exactly the actor's and the critic's parameters")
-        # SB3 Polyak-updates critic, actor (tau), then copies the batch-norm statistics (tau = 1): one list each
-        self.online = [*self.critic_params, *self.actor_params]
-        self.target = [*model.critic_target.parameters(), *model.actor_target.parameters()]
-        self.stats = [*model.critic_batch_norm_stats, *model.actor_batch_norm_stats]
-        self.target_stats = [*model.critic_batch_norm_stats_target, *model.actor_batch_norm_stats_target]
-        if len(self.online) != len(self.target) or len(self.stats) != len(self.target_stats):
-            raise ValueError("the target networks do not match the online networks")
+        # The gradients are those of the parameters each optimizer updates
+        self.actor_params = self.actor_adam.params
+        self.critic_params = self.critic_adam.params
+        # SB3 Polyak-updates the critic, then the actor (tau), then copies the critic's and the actor's batch-norm
+        # statistics (tau = 1): one pass of foreach kernels per run of these groups that touches each target once (a
+        # features extractor shared by actor and critic is updated twice, one after the other, as SB3 does)
+        groups = [
+            (list(model.critic.parameters()), list(model.critic_target.parameters()), False),
+            (list(model.actor.parameters()), list(model.actor_target.parameters()), False),
+            (list(model.critic_batch_norm_stats), list(model.critic_batch_norm_stats_target), True),
+            (list(model.actor_batch_norm_stats), list(model.actor_batch_norm_stats_target), True),
+        ]
+        self.passes: list[tuple[list[th.Tensor], list[th.Tensor], bool]] = []
+        for online, target, copy in groups:
+            if len(online) != len(target):
+                raise ValueError("the target networks do not match the online networks")
+            if not target:
+                continue
+            last = self.passes[-1] if self.passes else None
+            if last is not None and last[2] == copy and not {id(t) for t in target} & {id(t) for t in last[1]}:
+                last[0].extend(online)
+                last[1].extend(target)
+            else:
+                self.passes.append((list(online), list(target), copy))
 
     @staticmethod
     def _owners(model: Any) -> tuple[Any, ...]:
@@ -146,11 +159,10 @@ class LeanTrainer:
         """SB3's ``polyak_update`` of the targets (``target = (1 - tau) * target + tau * online``), and the copy of the
         batch-norm statistics (the same update with ``tau = 1``), one kernel per tensor."""
         with th.no_grad():
-            th._foreach_mul_(self.target, 1 - tau)
-            th._foreach_add_(self.target, self.online, alpha=tau)
-            if self.stats:
-                th._foreach_mul_(self.target_stats, 0.0)
-                th._foreach_add_(self.target_stats, self.stats, alpha=1.0)
+            for online, target, copy in self.passes:
+                weight = 1.0 if copy else tau
+                th._foreach_mul_(target, 1 - weight)
+                th._foreach_add_(target, online, alpha=weight)
 
 
 def lean_trainer(model: Any) -> LeanTrainer:
@@ -196,12 +208,14 @@ def lean_train(model: Any, gradient_steps: int, batch_size: int) -> None:
         else:
             critic_loss = sum(F.mse_loss(current_q, target_q_values) for current_q in current_q_values)
         critic_losses.append(critic_loss.item())
-        trainer.critic_adam.step(th.autograd.grad(critic_loss, trainer.critic_params))
+        # allow_unused: a features extractor shared with the actor gets no gradient from the critic loss (SB3's Adam
+        # then skips it, as FusedAdamStep does)
+        trainer.critic_adam.step(th.autograd.grad(critic_loss, trainer.critic_params, allow_unused=True))
 
         if model._n_updates % model.policy_delay == 0:
             actor_loss = -critic.q1_forward(data.observations, actor(data.observations)).mean()
             actor_losses.append(actor_loss.item())
-            trainer.actor_adam.step(th.autograd.grad(actor_loss, trainer.actor_params))
+            trainer.actor_adam.step(th.autograd.grad(actor_loss, trainer.actor_params, allow_unused=True))
             trainer.polyak(model.tau)
 
     model.logger.record("train/n_updates", model._n_updates, exclude="tensorboard")
