@@ -4,12 +4,14 @@ Training speed of DTDPG vs SB3's DDPG, measured side by side in one process.
 All learn with the same hyperparameters (DTDPG's defaults: learning rate 1e-3, tau 0.005, gamma 0.95, 3-step
 returns; network sizes, batch size, buffer size and learning starts from the command line) on the same env, with an
 OU action noise (DTDPG: its default linearly decayed OU noise; DDPG: SB3's constant OU noise of the same initial
-scale), one gradient step per env step. Variants: SB3's DDPG as SB3 builds it (default Adam) and with the fused
-Adam that DTDPG uses by default; DTDPG with its lean training step (the default) and with SB3's generic step
-(``lean=False``, the same numbers, bit for bit). After a warm-up, the models alternate
+scale), one gradient step per env step. Variants: SB3's DDPG as SB3 builds it (default Adam), with the fused
+Adam that DTDPG uses by default, and with the lean training step (``LeanDDPG``: SB3's DDPG bit for bit); DTDPG
+with its lean training step (the default) and with SB3's generic step (``lean=False``, the same numbers, bit for
+bit). After a warm-up, the models alternate
 ``learn(--steps, reset_num_timesteps=False)`` chunks ``--repeats`` times (the order reversed every other round),
 so that load changes on the machine hit all alike. Printed: the median steps/s (wall clock) of each, and the
-median of the per-repeat ratios DTDPG / variant, from wall-clock and from process CPU time.
+median of the per-repeat ratios DTDPG / variant, from wall-clock and from process CPU time, and variant / SB3 DDPG
+(CPU time).
 
 The floor: copies of the same networks doing their forward passes, backward passes and fused Adam steps on one
 fixed batch (no env, no replay buffer, no target update, no logging), timed in the same rounds as the chunks:
@@ -38,6 +40,7 @@ from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from torch.nn import functional as F
 
 from sb3_dtdpg import DTDPG
+from sb3_dtdpg.dtdpg.lean import LeanDDPG
 
 #: The model whose ratios to the others are printed, and the baseline of the bar.
 DTDPG_LEAN, BASELINE = "DTDPG", "SB3 DDPG"
@@ -106,13 +109,14 @@ def benchmark(env_id: str, net_arch: list[int], batch_size: int, steps: int, rep
     n_actions = int(np.prod(dtdpg.action_space.shape))
     sigma = float(np.mean(dtdpg.action_noise.current_sigma))
 
-    def ddpg(**policy_kwargs) -> DDPG:
+    def ddpg(cls: type[DDPG] = DDPG, **policy_kwargs) -> DDPG:
         noise = OrnsteinUhlenbeckActionNoise(np.zeros(n_actions), sigma * np.ones(n_actions))
-        return DDPG("MlpPolicy", env_id, action_noise=noise, policy_kwargs=dict(net_arch=net_arch, **policy_kwargs), **common)
+        return cls("MlpPolicy", env_id, action_noise=noise, policy_kwargs=dict(net_arch=net_arch, **policy_kwargs), **common)
 
     models = {
         BASELINE: ddpg(),
         "SB3 DDPG fused Adam": ddpg(optimizer_kwargs=dict(fused=True)),
+        "LeanDDPG": ddpg(LeanDDPG),  # SB3's DDPG (default Adam) with the lean step: the same weights bit for bit
         "DTDPG lean=False": DTDPG("MlpPolicy", env_id, policy_kwargs=dict(net_arch=net_arch), lean=False, **common),
         DTDPG_LEAN: dtdpg,
     }
@@ -141,6 +145,7 @@ def benchmark(env_id: str, net_arch: list[int], batch_size: int, steps: int, rep
             steps_per_s=float(np.median(wall[name])),
             ratio_wall=float(np.median(lean_wall / np.array(wall[name]))),
             ratio_cpu=float(np.median(lean_cpu / np.array(cpu[name]))),
+            over_ddpg_cpu=float(np.median(np.array(cpu[name]) / base_cpu)),
         )
         for name in models
     }
@@ -208,7 +213,10 @@ def main() -> None:
         for name, r in results.items():
             print(f"{name:<40} {r['steps_per_s']:>14.0f} {r['cpu_steps_per_s']:>8.0f} {r['cpu_steps_per_s'] / base:>11.2f}x")
         return
-    print(f"{'env':<18} {'variant':<25} {'steps/s':>8} {'DTDPG/variant (wall)':>21} {'(CPU time)':>11}")
+    print(
+        f"{'env':<18} {'variant':<25} {'steps/s':>8} {'DTDPG/variant (wall)':>21} {'(CPU time)':>11} "
+        f"{'variant/SB3 DDPG (CPU)':>23}"
+    )
     for env_id in args.envs:
         if not _available(env_id):
             print(f"{env_id:<18} (not available, skipped)")
@@ -216,7 +224,10 @@ def main() -> None:
         results = benchmark(env_id, args.net_arch, args.batch_size, args.steps, args.repeats, args.seed)
         for name, r in results.items():
             if "ratio_wall" in r:
-                print(f"{env_id:<18} {name:<25} {r['steps_per_s']:>8.0f} {r['ratio_wall']:>20.2f}x {r['ratio_cpu']:>10.2f}x")
+                print(
+                    f"{env_id:<18} {name:<25} {r['steps_per_s']:>8.0f} {r['ratio_wall']:>20.2f}x {r['ratio_cpu']:>10.2f}x "
+                    f"{r['over_ddpg_cpu']:>22.2f}x"
+                )
             else:
                 print(
                     f"{env_id:<18} {name:<25} {r['steps_per_s']:>8.0f}   updates/s: {r['over_ddpg_wall']:.2f}x SB3 DDPG's "

@@ -136,20 +136,15 @@ def test_lean_step_is_bit_identical_to_sb3_train(name: str, tmp_path: Path) -> N
     assert any(moved)
 
 
-def test_lean_step_logs_the_same_losses(tmp_path: Path) -> None:
+def _small_model(**kwargs) -> DTDPG:
+    return DTDPG("MlpPolicy", _point_env(), policy_kwargs=dict(net_arch=[16]), phases=ONE_PHASE, **kwargs)
+
+
+def test_lean_step_logs_the_same_losses() -> None:
     models = []
     for lean in (False, True):
         th.manual_seed(0)
-        model = DTDPG(
-            "MlpPolicy",
-            _point_env(),
-            learning_starts=30,
-            batch_size=16,
-            policy_kwargs=dict(net_arch=[16]),
-            seed=3,
-            lean=lean,
-            phases=ONE_PHASE,
-        )
+        model = _small_model(learning_starts=30, batch_size=16, seed=3, lean=lean)
         model.learn(60)
         model.train(gradient_steps=3, batch_size=16)
         models.append(model)
@@ -175,15 +170,7 @@ def test_lean_acting_matches_predict() -> None:
 
 
 def test_lean_caches_are_not_saved(tmp_path: Path) -> None:
-    model = DTDPG(
-        "MlpPolicy",
-        _point_env(),
-        learning_starts=20,
-        batch_size=8,
-        policy_kwargs=dict(net_arch=[16]),
-        seed=0,
-        phases=ONE_PHASE,
-    )
+    model = _small_model(learning_starts=20, batch_size=8, seed=0)
     model.learn(40)
     assert getattr(model, CACHE_ATTRIBUTE, None) is not None
     model.save(tmp_path / "model")

@@ -95,8 +95,9 @@ class DTDPG(LeanStep, DDPG):
     :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
         them over (ablation of the transfer, :meth:`reinitialize`)
     :param lean: Train and act with the lean step (:mod:`sb3_dtdpg.dtdpg.lean`): SB3's TD3/DDPG update and
-        acting path, bit-identical to them for the same seed, about twice as fast on CPU; False: SB3's generic
-        ``train()`` and ``_sample_action()`` (the reference the lean step is tested against)
+        acting path with the same numbers bit for bit for the same seed, in fewer operations (~1.2x the steps/s of
+        ``lean=False`` on one CPU thread, docs/BENCHMARKS.md); False: SB3's generic ``train()`` and
+        ``_sample_action()`` (the reference the lean step is tested against)
     :param _init_setup_model: Whether or not to build the network at the creation of the instance
     """
 
