@@ -54,13 +54,23 @@ ONE_PHASE = [Phase("destination", sigma=0.5, final_sigma=0.1, decay_episodes=10)
 CASES = {
     # Vector observations, 3-step returns, the relabelling n-step buffer (transfer at step 150), 2 gradient steps
     "mlp_nstep_relabel": dict(make_env=_point_env, n_envs=1, policy="MlpPolicy", n_steps=3, gradient_steps=2, phases=PHASES),
-    # Two envs in a vector env, one gradient step per vector step
-    "mlp_vec_env": dict(make_env=_point_env, n_envs=2, policy="MlpPolicy", n_steps=3, gradient_steps=1, phases=ONE_PHASE),
+    # Two envs in a vector env, one gradient step per env step, a learning-rate schedule
+    "mlp_vec_env": dict(
+        make_env=_point_env, n_envs=2, policy="MlpPolicy", n_steps=3, gradient_steps=-1, phases=ONE_PHASE, schedule=True
+    ),
+    # Networks re-created at the transfer (new optimizers: the caches are rebuilt)
+    "mlp_reinitialize": dict(
+        make_env=_point_env, n_envs=1, policy="MlpPolicy", n_steps=3, gradient_steps=1, phases=PHASES, reinitialize=True
+    ),
     # Dict observations (SB3's Dict buffer, one-step returns), 3 gradient steps
     "multi_input": dict(
         make_env=_dict_env, n_envs=1, policy="MultiInputPolicy", n_steps=1, gradient_steps=3, phases=ONE_PHASE
     ),
 }
+
+
+def _linear_schedule(progress_remaining: float) -> float:
+    return 3e-3 * progress_remaining
 
 
 def _train(case: dict, lean: bool, tmp_path: Path) -> DTDPG:
@@ -69,10 +79,11 @@ def _train(case: dict, lean: bool, tmp_path: Path) -> DTDPG:
     model = DTDPG(
         case["policy"],
         env,
-        learning_rate=3e-3,
+        learning_rate=_linear_schedule if case.get("schedule") else 3e-3,
         learning_starts=40,
         batch_size=16,
         buffer_size=1000,
+        reinitialize_at_transfer=case.get("reinitialize", False),
         n_steps=case["n_steps"],
         gradient_steps=case["gradient_steps"],
         phases=case["phases"],
