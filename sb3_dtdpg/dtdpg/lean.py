@@ -54,7 +54,9 @@ class FusedAdamStep:
             return False
         from torch.optim import optimizer as optimizer_module
 
-        if optimizer_module._global_optimizer_pre_hooks or optimizer_module._global_optimizer_post_hooks:
+        if getattr(optimizer_module, "_global_optimizer_pre_hooks", None) or getattr(
+            optimizer_module, "_global_optimizer_post_hooks", None
+        ):
             return False
         return all(p in optimizer.state and "exp_avg" in optimizer.state[p] for p in self.params)
 
@@ -113,7 +115,8 @@ class FusedAdamStep:
 class LeanTrainer:
     """
     The tensors and helpers one model's lean step needs, built once per set of networks and optimizers (a new
-    policy, from ``_setup_model`` or ``load``, or a loaded optimizer state, makes a new one).
+    policy, from ``_setup_model``, ``reinitialize`` or ``load``, makes a new one; :class:`FusedAdamStep` follows a
+    loaded optimizer state).
 
     :param model: A TD3/DDPG model (``actor``, ``critic``, their targets and optimizers, batch-norm statistics)
     """
@@ -149,7 +152,8 @@ class LeanTrainer:
 
     @staticmethod
     def _owners(model: Any) -> tuple[Any, ...]:
-        return (model.policy, model.actor, model.critic, model.actor_target, model.critic_target)
+        networks = (model.policy, model.actor, model.critic, model.actor_target, model.critic_target)
+        return (*networks, model.actor.optimizer, model.critic.optimizer)
 
     def valid_for(self, model: Any) -> bool:
         """:return: whether this cache was built for the model's current networks"""
