@@ -38,8 +38,12 @@ from sb3_dtdpg.dtdpg.dtdpg import DTDPG
 
 __all__ = [
     "ALGORITHMS",
+    "DDPG_KWARGS",
+    "DDPG_OU_SIGMA",
     "DEFAULT_ENV_ID",
     "HYPERPARAMS",
+    "TD3_NOISE_SIGMA",
+    "TUNED_KWARGS",
     "algorithm_class",
     "base_learning_rate",
     "check_hyperparams",
@@ -57,6 +61,15 @@ DEFAULT_ENV_ID = "NomaRadioMap-v0"
 _CLASSES: dict[str, type[BaseAlgorithm]] = {"dtdpg": DTDPG, "ddpg": DDPG, "td3": TD3, "sac": SAC, "tqc": TQC}
 #: The hyperparameter sets of :func:`make_model` (:data:`sb3_dtdpg.presets.PRESETS`).
 HYPERPARAMS: tuple[str, ...] = presets.PRESETS
+# Names of the presets' values kept for readers of the former constants (the same objects, not copies):
+#: :data:`sb3_dtdpg.presets.TUNED`
+TUNED_KWARGS: dict[str, Any] = presets.TUNED
+#: :data:`sb3_dtdpg.presets.TABLE_I`, the settings DDPG shares with DT-DPG under ``hyperparams="paper"``
+DDPG_KWARGS: dict[str, Any] = presets.TABLE_I
+#: Scale of DDPG's constant OU noise (:data:`sb3_dtdpg.presets.BASELINE_NOISE`)
+DDPG_OU_SIGMA: float = presets.BASELINE_NOISE["ddpg"][1]
+#: Scale of TD3's Gaussian exploration noise (:data:`sb3_dtdpg.presets.BASELINE_NOISE`)
+TD3_NOISE_SIGMA: float = presets.BASELINE_NOISE["td3"][1]
 
 
 def _check_algo(algo: str) -> str:

@@ -28,6 +28,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.noise import ActionNoise, NormalActionNoise, OrnsteinUhlenbeckActionNoise
+from stable_baselines3.common.utils import ConstantSchedule
 
 from sb3_dtdpg.common.noise import noise_settings
 from sb3_dtdpg.common.phases import Phase
@@ -235,7 +236,8 @@ def model_settings(model: BaseAlgorithm) -> dict[str, Any]:
         value = getattr(model, name)
         if name == "learning_rate":
             schedule = value if inspect.isfunction(value) else type(value)
-            values["learning_rate_schedule"] = _name(schedule) if callable(value) else "constant"
+            constant = not callable(value) or isinstance(value, ConstantSchedule)  # the RL Zoo passes a ConstantSchedule
+            values["learning_rate_schedule"] = "constant" if constant else _name(schedule)
             value = model.lr_schedule(1.0)
         elif name == "action_noise":
             value = noise_settings(value)
