@@ -79,3 +79,11 @@ def test_make_model_checks_every_algorithm(algo, kwargs, message):
         make_model(algo, env, **kwargs)
     with pytest.raises(ValueError, match=re.escape("learning_rate must be a finite number > 0, got -1.0")):
         make_model(algo, env, learning_rate=-1.0)
+
+
+def test_the_curriculum_callback_refuses_a_file_as_its_folder(tmp_path):
+    from sb3_dtdpg import CurriculumTransferCallback, Phase
+
+    (tmp_path / "taken").write_text("")
+    with pytest.raises(ValueError, match="CurriculumTransferCallback: save_path must be a folder, got the file"):
+        CurriculumTransferCallback([Phase("train", reward_phase=None)], save_path=tmp_path / "taken")

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
-__all__ = ["check_off_policy_settings", "check_total_timesteps"]
+__all__ = ["check_folder", "check_off_policy_settings", "check_total_timesteps"]
 
 
 def _is_int(value: Any) -> bool:
@@ -95,3 +96,14 @@ def check_total_timesteps(total_timesteps: Any) -> None:
     """
     if not _is_int(total_timesteps) or total_timesteps < 1:
         raise ValueError(f"learn(): total_timesteps must be a positive integer, got {total_timesteps!r}")
+
+
+def check_folder(owner: str, name: str, path: str | os.PathLike[str] | None) -> None:
+    """
+    :param owner: what the setting is for, at the start of the message
+    :param name: the setting
+    :param path: a folder to write into later (None: none); it may not exist yet
+    :raises ValueError: when the path is an existing file (or anything else that is not a folder)
+    """
+    if path is not None and os.path.lexists(path) and not os.path.isdir(path):
+        raise ValueError(f"{owner}: {name} must be a folder, got the file {os.fspath(path)!r}")

@@ -1,5 +1,4 @@
 import dataclasses
-import os
 import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
@@ -14,7 +13,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 
 from sb3_dtdpg.common.buffers import reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
-from sb3_dtdpg.common.checks import check_off_policy_settings, check_total_timesteps
+from sb3_dtdpg.common.checks import check_folder, check_off_policy_settings, check_total_timesteps
 from sb3_dtdpg.common.noise import decaying_noise
 from sb3_dtdpg.common.phases import Phase, default_curriculum, parse_phases
 from sb3_dtdpg.dtdpg.policies import CnnPolicy, DTDPGPolicy, MlpPolicy, MultiInputPolicy
@@ -127,30 +126,7 @@ class DTDPG(DDPG):
         reinitialize_at_transfer: bool = False,
         _init_setup_model: bool = True,
     ):
-        check_off_policy_settings(
-            "DTDPG",
-            dict(
-                learning_rate=learning_rate,
-                buffer_size=buffer_size,
-                learning_starts=learning_starts,
-                batch_size=batch_size,
-                tau=tau,
-                gamma=gamma,
-                train_freq=train_freq,
-                gradient_steps=gradient_steps,
-                n_steps=n_steps,
-                policy_kwargs=policy_kwargs,
-            ),
-        )
-        if (
-            curriculum_save_path is not None
-            and os.path.exists(curriculum_save_path)
-            and not os.path.isdir(curriculum_save_path)
-        ):
-            raise ValueError(f"DTDPG: curriculum_save_path must be a folder, got the file {curriculum_save_path!r}")
-        super().__init__(
-            policy=policy,
-            env=env,
+        settings: dict[str, Any] = dict(
             learning_rate=learning_rate,
             buffer_size=buffer_size,
             learning_starts=learning_starts,
@@ -159,17 +135,24 @@ class DTDPG(DDPG):
             gamma=gamma,
             train_freq=train_freq,
             gradient_steps=gradient_steps,
+            n_steps=n_steps,
+            policy_kwargs=policy_kwargs,
+        )
+        check_off_policy_settings("DTDPG", settings)
+        check_folder("DTDPG", "curriculum_save_path", curriculum_save_path)
+        super().__init__(
+            policy=policy,
+            env=env,
             action_noise=action_noise,
             replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs,
             optimize_memory_usage=optimize_memory_usage,
-            n_steps=n_steps,
             tensorboard_log=tensorboard_log,
-            policy_kwargs=policy_kwargs,
             verbose=verbose,
             seed=seed,
             device=device,
             _init_setup_model=False,
+            **settings,
         )
         self.curriculum_save_path = curriculum_save_path
         self.reinitialize_at_transfer = reinitialize_at_transfer
