@@ -37,8 +37,8 @@ TINY = dict(policy_kwargs=dict(net_arch=[8]), learning_starts=10, batch_size=8)
         (dict(learning_starts=-1), "learning_starts must be an integer >= 0, got -1"),
         (dict(train_freq=0), "train_freq must be an integer >= 1, got 0"),
         (dict(train_freq=(2, "epoch")), "the unit of train_freq must be 'step' or 'episode', got 'epoch'"),
-        (dict(gradient_steps=0), "gradient_steps must be an integer >= 1, or -1, got 0"),
-        (dict(gradient_steps=-2), "gradient_steps must be an integer >= 1, or -1, got -2"),
+        (dict(gradient_steps=-2), "gradient_steps must be an integer >= 0, or -1, got -2"),
+        (dict(gradient_steps=1.5), "gradient_steps must be an integer >= 0, or -1, got 1.5"),
     ],
 )
 def test_dtdpg_constructor_ranges(kwargs, message):

@@ -70,8 +70,8 @@ def check_off_policy_settings(owner: str, settings: Mapping[str, Any]) -> None:
     Range-check the numeric constructor arguments of an SB3 off-policy algorithm (DDPG, TD3, SAC, TQC, DTDPG):
     ``learning_rate`` (a schedule's initial value) finite and > 0, ``buffer_size``, ``batch_size`` and ``n_steps``
     >= 1, ``learning_starts`` >= 0, ``gamma`` in [0, 1], ``tau`` in (0, 1], ``train_freq`` >= 1 (with unit
-    ``"step"`` or ``"episode"``), ``gradient_steps`` >= 1 or -1 (SB3: as many as env steps), and the layer sizes
-    of ``policy_kwargs["net_arch"]`` >= 1.
+    ``"step"`` or ``"episode"``), ``gradient_steps`` >= 0 (0: collect only) or -1 (SB3: as many as env steps),
+    and the layer sizes of ``policy_kwargs["net_arch"]`` >= 1.
 
     :param owner: what the settings are for, at the start of the message (e.g. ``"DTDPG"``)
     :param settings: the constructor arguments; absent or None ones are not checked
@@ -85,8 +85,8 @@ def check_off_policy_settings(owner: str, settings: Mapping[str, Any]) -> None:
         raise ValueError(f"{owner}: gamma must be a number in [0, 1], got {gamma!r}")
     if tau is not None and (not _is_real(tau) or not 0 < tau <= 1):
         raise ValueError(f"{owner}: tau must be a number in (0, 1], got {tau!r}")
-    if gradient_steps is not None and (not _is_int(gradient_steps) or (gradient_steps < 1 and gradient_steps != -1)):
-        raise ValueError(f"{owner}: gradient_steps must be an integer >= 1, or -1, got {gradient_steps!r}")
+    if gradient_steps is not None and (not _is_int(gradient_steps) or gradient_steps < -1):
+        raise ValueError(f"{owner}: gradient_steps must be an integer >= 0, or -1, got {gradient_steps!r}")
 
 
 def check_total_timesteps(total_timesteps: Any) -> None:
