@@ -6,9 +6,10 @@ Quickstart: train DT-DPG on the NOMA indoor radio-map env, evaluate it, save it,
 
 The ``tuned`` preset gives DTDPG the measured best settings on the mission (docs/BENCHMARKS.md; the paper's
 Table I is the ``paper`` preset): batch-norm actor and critic, OU noise decaying per episode, and the two-phase
-curriculum ("destination", then "mqi" once the robots reach their destinations in 95 % of the last 20 episodes, or after 500 episodes). The env
-gets the goal-conditioned observation by default (``--observation paper``: the paper's state, which learns the
-mission far more slowly, docs/BENCHMARKS.md "What limits learning"). A small budget stays in the first phase.
+curriculum ("destination", then "mqi" once the robots reach their destinations in 95 % of the last 20 episodes, or
+after 500 episodes). The env gets the goal-conditioned observation by default (``--observation paper``: the
+paper's state, which learns the mission far more slowly, docs/BENCHMARKS.md "What limits learning"). A small
+budget stays in the first phase.
 """
 
 import argparse
