@@ -213,3 +213,32 @@ def test_a_scale_change_mid_episode_keeps_the_ou_state():
     np.random.seed(1)
     expected = state + 0.15 * (0.0 - state) * 1e-2 + 0.3 * np.sqrt(1e-2) * np.random.normal(size=(1,))
     np.testing.assert_allclose(drawn, expected.astype(np.float32), rtol=1e-6)
+
+
+def test_a_noise_pickled_in_the_former_layout_loads_and_goes_on():
+    """Models saved by sb3-dtdpg 0.1.0 pickled the noise with the OU state in its own attributes."""
+    noise = LinearDecayOUNoise(np.zeros(2), 0.5, 0.1, 4)
+    _run_episode(noise)
+    noise()
+    schedule = noise._schedule
+    del schedule.version
+    former = {
+        "_schedule": schedule,
+        "_steps_since_reset": 1,
+        "_theta": 0.15,
+        "_mu": np.zeros(2),
+        "_dt": 1e-2,
+        "_dtype": np.float32,
+        "initial_noise": None,
+        "noise_prev": noise.noise_prev.copy(),
+    }
+    restored = LinearDecayOUNoise.__new__(LinearDecayOUNoise)
+    restored.__setstate__(former)
+    assert restored.episode == 1 and restored._steps_since_reset == 1
+    np.testing.assert_array_equal(restored.current_sigma, noise.current_sigma)
+    np.random.seed(5)
+    expected = noise()
+    np.random.seed(5)
+    np.testing.assert_array_equal(restored(), expected)
+    restored.reset()
+    assert restored.episode == 2

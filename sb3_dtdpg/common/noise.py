@@ -200,6 +200,24 @@ class LinearDecayOUNoise(ActionNoise):
         schedule.set_episode(0)
         self._steps_since_reset = 0
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        if "process" in state:
+            self.__dict__.update(state)
+            return
+        # Pickled by sb3-dtdpg 0.1.0, whose noise drew the OU process itself (a model saved then still loads)
+        schedule = state["_schedule"]
+        schedule.__dict__.setdefault("version", 0)
+        self._schedule, self._steps_since_reset = schedule, state["_steps_since_reset"]
+        self._process_args = dict(
+            mean=state["_mu"],
+            theta=state["_theta"],
+            dt=state["_dt"],
+            initial_noise=state["initial_noise"],
+            dtype=state["_dtype"],
+        )
+        self.process = self._new_process()
+        self.process.noise_prev = state["noise_prev"]
+
     def __deepcopy__(self, memo: dict[int, Any]) -> "LinearDecayOUNoise":
         # Share the schedule between copies (SB3's VectorizedActionNoise deep-copies the noise per env)
         memo[id(self._schedule)] = self._schedule
