@@ -4,11 +4,12 @@ Quickstart: train DT-DPG on the NOMA indoor radio-map env, evaluate it, save it,
     python examples/quickstart.py                      # small budget: a minute or two on a laptop CPU
     python examples/quickstart.py --timesteps 35000 --tensorboard-log runs/   # learns the mission (README)
 
-DTDPG's defaults are the measured best settings (docs/BENCHMARKS.md; the paper's Table I is the ``paper`` preset):
-batch-norm actor and critic, OU noise decaying per episode, and the two-phase curriculum ("destination", then
-"mqi" once the robots reach their destinations in 95 % of the last 20 episodes, or after 500 episodes). The env
-gets the goal-conditioned observation by default (``--observation paper``: the paper's state, which learns the
-mission far more slowly, docs/BENCHMARKS.md "What limits learning"). A small budget stays in the first phase.
+The ``tuned`` preset gives DTDPG the measured best settings on the mission (docs/BENCHMARKS.md; the paper's
+Table I is the ``paper`` preset): batch-norm actor and critic, OU noise decaying per episode, and the two-phase
+curriculum ("destination", then "mqi" once the robots reach their destinations in 95 % of the last 20 episodes, or
+after 500 episodes). The env gets the goal-conditioned observation by default (``--observation paper``: the
+paper's state, which learns the mission far more slowly, docs/BENCHMARKS.md "What limits learning"). A small
+budget stays in the first phase.
 """
 
 import argparse
@@ -18,7 +19,7 @@ import numpy as np
 import torch as th
 
 import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)
-from sb3_dtdpg import DTDPG
+from sb3_dtdpg import DTDPG, MissionLoggerCallback, preset
 from sb3_dtdpg.evaluation import evaluate
 
 
@@ -38,8 +39,8 @@ def main() -> None:
     th.set_num_threads(args.threads)
 
     env = gym.make(args.env, observation=args.observation)
-    model = DTDPG("MlpPolicy", env, seed=args.seed, tensorboard_log=args.tensorboard_log, verbose=0)
-    model.learn(args.timesteps, progress_bar=True)
+    model = DTDPG("MlpPolicy", env, seed=args.seed, tensorboard_log=args.tensorboard_log, **preset("tuned"))
+    model.learn(args.timesteps, callback=MissionLoggerCallback(), progress_bar=True)
     phase = model.phases[model.curriculum_state["phase_index"]].name
     print(f"trained {model.num_timesteps} steps, {model._episode_num} episodes; curriculum phase: {phase!r}")
 

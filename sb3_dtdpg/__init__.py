@@ -7,6 +7,7 @@ from sb3_dtdpg.common.noise import LinearDecayOUNoise
 from sb3_dtdpg.common.phases import Phase
 from sb3_dtdpg.dtdpg import DTDPG, CnnPolicy, MlpPolicy, MultiInputPolicy
 from sb3_dtdpg.missions import MissionLoggerCallback
+from sb3_dtdpg.presets import preset
 
 try:
     __version__ = version("sb3-dtdpg")
@@ -23,4 +24,5 @@ __all__ = [
     "MultiInputPolicy",
     "Phase",
     "__version__",
+    "preset",
 ]

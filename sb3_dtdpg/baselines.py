@@ -3,47 +3,46 @@
 ``make_env`` and ``make_model`` build every algorithm the same way, so that a comparison differs only
 in the algorithm:
 
-- ``"dtdpg"``: :class:`sb3_dtdpg.DTDPG` with its defaults (paper Table I) and its two reward phases,
-  "destination" then "mqi" (the env starts in "destination"; the curriculum switches it).
+- ``"dtdpg"``: :class:`sb3_dtdpg.DTDPG` with the settings set's curriculum, "destination" then "mqi" (the env
+  starts in "destination"; the curriculum switches it).
 - ``"ddpg"``: plain SB3 ``DDPG``, the paper's comparison: a plain MLP of DT-DPG's sizes (no batch norm),
   *constant* OU noise of scale 0.5 (DT-DPG's initial scale, Table I), the ``"combined"`` reward (the
-  paper's "contaminated" reward: inducing + QoS at once) and otherwise DT-DPG's hyperparameters
-  (learning rate 1e-4, batch 64, tau 0.002, buffer 5e4, gamma 0.99).
+  paper's "contaminated" reward: inducing + QoS at once) and otherwise DT-DPG's settings set.
 - ``"td3"``, ``"sac"`` (SB3) and ``"tqc"`` (sb3-contrib): the stronger learners a reviewer asks about,
   with SB3's defaults, the ``"combined"`` reward and, for TD3, Gaussian action noise of scale 0.1 (the RL
   Zoo's usual setting; SB3's TD3 has no exploration noise by default). Nothing else is tuned.
 
 Every algorithm runs in NOMA and OMA mode (``multiple_access``) and gets the same budget (episodes).
 
-Two hyperparameter sets (``hyperparams``, ``--hyperparams`` of the CLI): ``"paper"`` (the above, Table I) and
-``"tuned"``: the best settings measured for DT-DPG on ``NomaRadioMap-v0`` (:data:`TUNED_KWARGS`, the same as
-``zoo_configs/dtdpg.yml``; docs/BENCHMARKS.md), given to DT-DPG *and* to DDPG, so that the comparison still
-differs only in the method. The tuned set is defined for ``dtdpg`` and ``ddpg`` only.
+The settings sets (``hyperparams``, ``--hyperparams`` of the CLI) are :mod:`sb3_dtdpg.presets`: ``"paper"``
+(Table I) and ``"tuned"`` (the best measured settings on ``NomaRadioMap-v0``), the latter for ``dtdpg`` and
+``ddpg`` only.
 """
 
 from __future__ import annotations
 
-import copy
 import inspect
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 from sb3_contrib import TQC
 from stable_baselines3 import DDPG, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
 import noma_radiomap  # noqa: F401  (registers the env ids)
+from sb3_dtdpg import presets
+from sb3_dtdpg.common.checks import check_off_policy_settings
 from sb3_dtdpg.dtdpg.dtdpg import DTDPG
-from sb3_dtdpg.missions import default_phases
 
 __all__ = [
     "ALGORITHMS",
+    "DDPG_KWARGS",
+    "DDPG_OU_SIGMA",
     "DEFAULT_ENV_ID",
     "HYPERPARAMS",
+    "TD3_NOISE_SIGMA",
     "TUNED_KWARGS",
     "algorithm_class",
     "base_learning_rate",
@@ -60,35 +59,17 @@ __all__ = [
 ALGORITHMS: tuple[str, ...] = ("dtdpg", "ddpg", "td3", "sac", "tqc")
 DEFAULT_ENV_ID = "NomaRadioMap-v0"
 _CLASSES: dict[str, type[BaseAlgorithm]] = {"dtdpg": DTDPG, "ddpg": DDPG, "td3": TD3, "sac": SAC, "tqc": TQC}
-#: DT-DPG's hyperparameters (paper Table I) that plain DDPG shares, so that only the method differs.
-DDPG_KWARGS: dict[str, Any] = {
-    "learning_rate": 1e-4,
-    "buffer_size": 50_000,
-    "batch_size": 64,
-    "tau": 0.002,
-    "gamma": 0.99,
-    "learning_starts": 100,
-    "n_steps": 1,
-    "policy_kwargs": {"net_arch": [128, 64]},
-}
-#: The hyperparameter sets of :func:`make_model`.
-HYPERPARAMS: tuple[str, ...] = ("paper", "tuned")
-#: The best measured DT-DPG settings on NomaRadioMap-v0 (docs/BENCHMARKS.md; zoo_configs/dtdpg.yml): 95 % phase-1
-#: success at episodes 440 and 416 (seeds 0, 1) where Table I's reach 0 % in 200 episodes.
-TUNED_KWARGS: dict[str, Any] = {
-    "learning_rate": 1e-3,
-    "buffer_size": 200_000,
-    "learning_starts": 2000,
-    "batch_size": 128,
-    "tau": 0.005,
-    "gamma": 0.95,
-    "n_steps": 3,
-    "policy_kwargs": {"net_arch": [128, 128]},
-}
-#: Scale of DDPG's constant OU noise: DT-DPG's initial scale xi(0, 0) (Table I).
-DDPG_OU_SIGMA = 0.5
-#: Scale of TD3's Gaussian exploration noise (the RL Zoo's usual value).
-TD3_NOISE_SIGMA = 0.1
+#: The hyperparameter sets of :func:`make_model` (:data:`sb3_dtdpg.presets.PRESETS`).
+HYPERPARAMS: tuple[str, ...] = presets.PRESETS
+# Names of the presets' values kept for readers of the former constants (the same objects, not copies):
+#: :data:`sb3_dtdpg.presets.TUNED`
+TUNED_KWARGS: dict[str, Any] = presets.TUNED
+#: :data:`sb3_dtdpg.presets.TABLE_I`, the settings DDPG shares with DT-DPG under ``hyperparams="paper"``
+DDPG_KWARGS: dict[str, Any] = presets.TABLE_I
+#: Scale of DDPG's constant OU noise (:data:`sb3_dtdpg.presets.BASELINE_NOISE`)
+DDPG_OU_SIGMA: float = presets.BASELINE_NOISE["ddpg"][1]
+#: Scale of TD3's Gaussian exploration noise (:data:`sb3_dtdpg.presets.BASELINE_NOISE`)
+TD3_NOISE_SIGMA: float = presets.BASELINE_NOISE["td3"][1]
 
 
 def _check_algo(algo: str) -> str:
@@ -111,10 +92,7 @@ def check_hyperparams(algo: str, hyperparams: str) -> None:
     :param hyperparams: a name of :data:`HYPERPARAMS`
     :raises ValueError: when the set is unknown, or not defined for the algorithm
     """
-    if hyperparams not in HYPERPARAMS:
-        raise ValueError(f"hyperparams must be one of {HYPERPARAMS}, got {hyperparams!r}")
-    if hyperparams == "tuned" and algo not in ("dtdpg", "ddpg"):
-        raise ValueError(f"hyperparams='tuned' is defined for 'dtdpg' and 'ddpg' only, got algo={algo!r}")
+    presets.check_preset(_check_algo(algo), hyperparams)
 
 
 def hyperparameter(algo: str, name: str, hyperparams: str = "paper") -> Any:
@@ -122,13 +100,12 @@ def hyperparameter(algo: str, name: str, hyperparams: str = "paper") -> Any:
     :param algo: one of :data:`ALGORITHMS`
     :param name: a constructor argument of the algorithm (e.g. ``"learning_starts"``)
     :param hyperparams: one of :data:`HYPERPARAMS`
-    :return: the value :func:`make_model` gives that argument when none is passed
+    :return: the value :func:`make_model` gives that argument when none is passed: the set's
+        (:func:`sb3_dtdpg.presets.settings`), else the class default
     """
-    check_hyperparams(_check_algo(algo), hyperparams)
-    if hyperparams == "tuned" and name in TUNED_KWARGS:
-        return copy.deepcopy(TUNED_KWARGS[name])
-    if algo in ("dtdpg", "ddpg") and name in DDPG_KWARGS:
-        return copy.deepcopy(DDPG_KWARGS[name])
+    values = presets.settings(_check_algo(algo), hyperparams)
+    if name in values:
+        return values[name]
     return inspect.signature(_CLASSES[algo]).parameters[name].default
 
 
@@ -243,42 +220,35 @@ def make_model(
     :param learning_rate: overrides the algorithm's learning rate (the paper's two-learning-rate experiment)
     :param destination_episodes: DT-DPG only: the episode budget of the destination phase (None: DTDPG's default)
     :param verbose: SB3 verbosity
-    :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (:data:`TUNED_KWARGS`, ``dtdpg`` and ``ddpg`` only)
+    :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (``dtdpg`` and ``ddpg`` only), :mod:`sb3_dtdpg.presets`;
+        DT-DPG gets the set's mission curriculum on a mission env (on another env: the env's own or one phase)
     :param kwargs: further constructor arguments, passed on as is
     :return: the (untrained) model
     """
     algo = _check_algo(algo)
-    check_hyperparams(algo, hyperparams)
-    n_actions = int(np.prod(env.action_space.shape))
-    options: dict[str, Any] = {}
-    if algo == "dtdpg":
-        if destination_episodes is not None:
-            options["phases"] = default_phases(destination_episodes=destination_episodes)
-    elif destination_episodes is not None:
-        raise ValueError(f"destination_episodes applies to 'dtdpg' only, got algo={algo!r}")
-    if algo in ("dtdpg", "ddpg") and hyperparams == "paper":
-        options.update(copy.deepcopy(DDPG_KWARGS))  # DTDPG's own defaults are the tuned set
-    if algo == "ddpg":
-        options.update(copy.deepcopy(DDPG_KWARGS))  # SB3 adds keys to policy_kwargs in place
-        options["action_noise"] = OrnsteinUhlenbeckActionNoise(np.zeros(n_actions), DDPG_OU_SIGMA * np.ones(n_actions))
-    elif algo == "td3":
-        options["action_noise"] = NormalActionNoise(np.zeros(n_actions), TD3_NOISE_SIGMA * np.ones(n_actions))
-    if hyperparams == "tuned":
-        options.update(copy.deepcopy(TUNED_KWARGS))
+    options = presets.model_kwargs(
+        algo, hyperparams, env.action_space, destination_episodes=destination_episodes, curriculum=_is_mission(env)
+    )
     if learning_rate is not None:
         options["learning_rate"] = learning_rate
     options.update(kwargs)
+    check_off_policy_settings(algo, options)
     return _CLASSES[algo]("MlpPolicy", env, seed=seed, tensorboard_log=tensorboard_log, verbose=verbose, **options)
+
+
+def _is_mission(env: gym.Env) -> bool:
+    from noma_radiomap import NomaRadioMapEnv
+
+    return isinstance(getattr(env, "unwrapped", None), NomaRadioMapEnv)
 
 
 def mission_callbacks(model: BaseAlgorithm) -> list[BaseCallback]:
     """
-    Callbacks to pass to ``learn`` so that every algorithm logs the same ``mission/*`` scalars
-    (DT-DPG adds its mission logger itself).
+    Callbacks to pass to ``learn`` so that every algorithm, DT-DPG included, logs the same ``mission/*`` scalars.
 
     :param model: a model built by :func:`make_model`
     :return: the callbacks
     """
     from sb3_dtdpg.missions import MissionLoggerCallback
 
-    return [] if isinstance(model, DTDPG) else [MissionLoggerCallback()]
+    return [MissionLoggerCallback()]

@@ -1,21 +1,23 @@
-"""The paper's curriculum for the mission env (``noma_radiomap``), defined next to the mission it trains.
+"""The mission env's (``noma_radiomap``) curricula and logging, defined next to the mission they train.
 
-The algorithm package (:mod:`sb3_dtdpg.dtdpg`, :mod:`sb3_dtdpg.common`) knows no env: it trains through any
-list of :class:`~sb3_dtdpg.common.phases.Phase` objects and relabels the replay buffer of any env with
-``set_reward_phase`` and ``reward_weights``. The names of the mission's reward phases (``"destination"``,
-``"mqi"``), the paper's noise scales and the mission's ``info`` figures (``mqi``, ...) live here.
+The algorithm (:class:`sb3_dtdpg.DTDPG`, :mod:`sb3_dtdpg.common`) knows no env: it trains through any list of
+:class:`~sb3_dtdpg.common.phases.Phase` objects, the env's own ``default_curriculum`` or a single phase. The
+names of the mission's reward phases (``"destination"``, ``"mqi"``), the noise scales of the paper's two
+phases and the mission's ``info`` figures (``mqi``, ...) live here; the named settings sets that use these
+curricula are in :mod:`sb3_dtdpg.presets`.
 """
 
 from collections import deque
-from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_dtdpg.common.phases import Phase, ReplayHandling, parse_phases, single_phase
+from sb3_dtdpg.common.phases import Phase, ReplayHandling, parse_phases
 
-__all__ = ["MissionLoggerCallback", "default_curriculum", "default_phases"]
+__all__ = ["PAPER_EPISODES", "MissionLoggerCallback", "default_phases", "paper_phases"]
+
+#: The paper's training budget in episodes (Table II: radio-map training, 500 episodes).
+PAPER_EPISODES = 500
 
 
 def default_phases(
@@ -25,7 +27,8 @@ def default_phases(
     replay_handling: ReplayHandling = "relabel",
 ) -> list[Phase]:
     """
-    The paper's two phases (Section IV-D): destination training, then MQI training.
+    The mission's curriculum of the tuned settings (:func:`sb3_dtdpg.presets.preset` ``"tuned"``): the paper's two
+    phases (Section IV-D), destination training then MQI training, with an early transfer and relabelling.
 
     OU noise scales are the paper's (0.5 then 0.4, Table I / Section V). The paper gives no final scale;
     we decay linearly to 0.1 and 0.05. Phase 1 ends after ``destination_episodes`` episodes, or earlier
@@ -33,14 +36,14 @@ def default_phases(
     episodes. Phase 2 lasts until ``learn()`` ends.
 
     :param destination_episodes: Episode budget of the destination phase (default: the paper's 500 training
-        episodes, over which its noise decays; the early transfer ends it after 42-152 episodes with the
-        goal-conditioned observation, docs/BENCHMARKS.md).
+        episodes, over which its noise decays; the early transfer ends it sooner with the goal-conditioned
+        observation, docs/BENCHMARKS.md).
     :param success_threshold: Early-transfer threshold of the destination phase (``None``: off). Measured
         against 0.8 and no early transfer in docs/BENCHMARKS.md, "The early-transfer rule".
     :param success_window: Window K of the early-transfer rule.
     :param replay_handling: Replay handling when entering the MQI phase. ``"relabel"`` (the default) trained
-        best in ``benchmarks/learning.py`` (docs/BENCHMARKS.md: mean test MQI over 3 seeds 657 vs 602 for
-        ``"keep"`` and 445 for ``"clear"``); it needs an env with ``reward_weights`` and reward components.
+        best in ``benchmarks/learning.py`` (docs/BENCHMARKS.md); it needs an env with ``reward_weights`` and
+        reward components.
     :return: The two phases.
     """
     return parse_phases(
@@ -58,19 +61,24 @@ def default_phases(
     )
 
 
-def default_curriculum(env: VecEnv | Any | None) -> list[Phase]:
+def paper_phases(destination_episodes: int = 300) -> list[Phase]:
     """
-    The curriculum ``DTDPG(phases=None)`` trains through.
+    The mission's curriculum of the paper's settings (:func:`sb3_dtdpg.presets.preset` ``"paper"``, docs/ZOO.md,
+    "The paper's settings"): the two phases of Algorithm 1 with the OU scales of Section V, 0.5 then 0.4, each
+    decayed linearly over its phase. Where the paper is silent: the destination phase lasts
+    ``destination_episodes`` (default 300 of the paper's 500 episodes) with no early transfer, the noise
+    decays to 0.1 and 0.05, the MQI phase's decay spans the remaining 200 episodes, and the replay buffer is
+    kept at the transfer (Algorithm 1 re-uses its memory buffer).
 
-    :param env: the training env (a ``VecEnv``), or None
-    :return: on an env with reward phases (``set_reward_phase``), :func:`default_phases`, relabelling the replay
-        buffer at the transfer when the env gives ``reward_weights`` (kept otherwise); else one phase that leaves
-        the reward alone, with the paper's phase-1 noise (0.5, decaying to 0.1 over 300 episodes)
+    :param destination_episodes: Episode budget of the destination phase.
+    :return: The two phases.
     """
-    if env is not None and env.has_attr("set_reward_phase"):
-        # Relabelling (the measured best) needs the env's reward weights; without them the buffer is kept
-        return default_phases(replay_handling="relabel" if env.has_attr("reward_weights") else "keep")
-    return single_phase(sigma=0.5, final_sigma=0.1, decay_episodes=300)
+    return parse_phases(
+        [
+            Phase("destination", n_episodes=destination_episodes, sigma=0.5, final_sigma=0.1),
+            Phase("mqi", sigma=0.4, final_sigma=0.05, decay_episodes=PAPER_EPISODES - 300, replay_handling="keep"),
+        ]
+    )
 
 
 class MissionLoggerCallback(BaseCallback):
@@ -83,7 +91,8 @@ class MissionLoggerCallback(BaseCallback):
     an off-policy algorithm dumps after every episode, so these are per-episode values.
     Keys absent from an env's infos are skipped.
 
-    :class:`~sb3_dtdpg.DTDPG` adds it by itself; any other SB3 algorithm gets the same scalars with::
+    Opt-in for every SB3 algorithm, :class:`~sb3_dtdpg.DTDPG` included (``sb3_dtdpg.baselines.mission_callbacks``
+    gives it to every algorithm on a mission env)::
 
         import gymnasium as gym
         import noma_radiomap  # registers the env ids

@@ -5,7 +5,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch as th
-import yaml
 from sb3_contrib import TQC
 from stable_baselines3 import DDPG, SAC, TD3
 from stable_baselines3.common.buffers import NStepReplayBuffer
@@ -15,7 +14,6 @@ from sb3_dtdpg import DTDPG
 from sb3_dtdpg.baselines import (
     ALGORITHMS,
     DDPG_OU_SIGMA,
-    TUNED_KWARGS,
     algorithm_class,
     base_learning_rate,
     make_env,
@@ -85,14 +83,6 @@ def test_tuned_hyperparameters_are_shared_by_dtdpg_and_ddpg(algo):
     if algo == "ddpg":  # still the paper's plain baseline: no batch norm, constant OU noise
         assert not any(isinstance(m, th.nn.BatchNorm1d) for m in model.policy.modules())
         assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
-
-
-def test_tuned_set_is_the_zoo_entry():
-    entry = yaml.safe_load((ZOO_CONFIGS / "dtdpg.yml").read_text())["NomaRadioMap-v0"]
-    assert eval(entry["policy_kwargs"]) == TUNED_KWARGS["policy_kwargs"]  # the zoo's format: a Python literal
-    assert {key: entry[key] for key in TUNED_KWARGS if key != "policy_kwargs"} == {
-        key: value for key, value in TUNED_KWARGS.items() if key != "policy_kwargs"
-    }
 
 
 def test_paper_learning_rates():

@@ -1,6 +1,5 @@
 """SB3's generic checks applied to DTDPG (run, save/load, replay buffer, set_env, determinism, multi-env)."""
 
-import dataclasses
 import inspect
 import os
 import warnings
@@ -44,21 +43,22 @@ def _assert_same_params(model_a: DTDPG, model_b: DTDPG) -> None:
         th.testing.assert_close(params_a[key], params_b[key], rtol=0, atol=0, msg=key)
 
 
-def test_defaults_are_the_documented_tuned_set():
-    """The constructor's defaults are TUNED_KWARGS (zoo_configs/dtdpg.yml, docs/BENCHMARKS.md), not Table I."""
-    from sb3_dtdpg.baselines import TUNED_KWARGS
-
-    model = DTDPG("MlpPolicy", "Pendulum-v1")
-    for key, value in TUNED_KWARGS.items():
-        if key != "policy_kwargs":
-            assert getattr(model, key) == value, key
-    assert model.policy.net_arch == TUNED_KWARGS["policy_kwargs"]["net_arch"]
+def test_defaults_are_sb3_ddpgs():
+    """The constructor's defaults are SB3's DDPG defaults (generic); the mission's settings are presets."""
+    ddpg = inspect.signature(DDPG.__init__).parameters
+    dtdpg = inspect.signature(DTDPG.__init__).parameters
+    for name in ddpg:
+        if name not in ("self", "policy", "env"):
+            assert dtdpg[name].default == ddpg[name].default, name
+    model, reference = DTDPG("MlpPolicy", "Pendulum-v1"), DDPG("MlpPolicy", "Pendulum-v1")
+    for key in ("learning_rate", "buffer_size", "learning_starts", "batch_size", "tau", "gamma", "n_steps", "train_freq"):
+        assert getattr(model, key) == getattr(reference, key), key
     assert isinstance(model.policy, DTDPGPolicy)
     assert isinstance(model.actor.optimizer, th.optim.Adam)
     assert [layer.out_features for layer in model.actor.mu if isinstance(layer, th.nn.Linear)] == [128, 128, 1]
     assert len(model.critic.q_networks) == 1  # DDPG: one critic
     assert model.policy_delay == 1 and model.target_noise_clip == 0.0
-    # the noise: linearly decayed OU armed from the single phase of an env without reward phases
+    # the noise: linearly decayed OU armed from the single phase of an env that offers no curriculum
     assert [phase.reward_phase for phase in model.phases] == [None]
     assert isinstance(model.action_noise, LinearDecayOUNoise)
     np.testing.assert_array_equal(model.action_noise.current_sigma, [model.phases[0].sigma])
@@ -72,19 +72,20 @@ def test_is_a_drop_in_for_ddpg():
 
 
 def test_phases_and_noise_on_a_phased_env():
+    # an env with reward phases but no curriculum of its own: one phase that leaves its reward alone
     model = DTDPG("MlpPolicy", PhasedPointEnv())
-    assert [(phase.name, phase.reward_phase) for phase in model.phases] == [("destination", "destination"), ("mqi", "mqi")]
+    assert [(phase.name, phase.reward_phase) for phase in model.phases] == [("train", None)]
     assert noise_sigma_of(model) == 0.5
     # a user's noise is used as is: the default phases do not re-arm it
     user_noise = NormalActionNoise(np.zeros(3), 0.2 * np.ones(3))
-    model = DTDPG("MlpPolicy", _phased(), action_noise=user_noise, phases=None, **TINY)
+    model = DTDPG("MlpPolicy", _CurriculumPhasedEnv(v_max=0.02), action_noise=user_noise, phases=None, **TINY)
     assert model.action_noise is user_noise
     assert [phase.sigma for phase in model.phases] == [None, None]
     model.learn(60)
     assert model.action_noise is user_noise and noise_sigma_of(model) == pytest.approx(0.2)
     phases = [dict(name="destination", n_episodes=2, sigma=0.3, final_sigma=0.1), dict(name="mqi", replay_handling="relabel")]
-    model = DTDPG("MlpPolicy", PhasedPointEnv(), phases=phases)
-    assert model.replay_buffer_class is RewardComponentsNStepReplayBuffer  # the defaults use 3-step returns
+    model = DTDPG("MlpPolicy", PhasedPointEnv(), phases=phases, n_steps=3)
+    assert model.replay_buffer_class is RewardComponentsNStepReplayBuffer
     assert isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
     assert noise_sigma_of(model) == 0.3
     assert type(DTDPG("MlpPolicy", PhasedPointEnv(), replay_buffer_class=ReplayBuffer, phases=phases[:1]).replay_buffer) is (
@@ -235,25 +236,28 @@ def test_user_callbacks_are_combined():
     assert model.curriculum_state["phase_index"] == 0
 
 
-class _PhasesWithoutWeights(PhasedPointEnv):
-    """Reward phases, but no reward_weights(): stored rewards cannot be recomputed."""
+class _CurriculumPhasedEnv(PhasedPointEnv):
+    """A phased env that offers its own curriculum (``default_curriculum``), 20-step episodes."""
 
-    def __getattribute__(self, name):
-        if name == "reward_weights":
-            raise AttributeError(name)
-        return super().__getattribute__(name)
+    default_curriculum = (
+        {"name": "destination", "n_episodes": 2, "sigma": 0.5, "final_sigma": 0.1},
+        {"name": "mqi", "sigma": 0.4, "replay_handling": "relabel"},
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(starts=[[0.05, 0.05]], destinations=[[0.95, 0.95]], **kwargs)
 
 
-def test_default_phases_relabel_when_the_env_gives_reward_weights():
-    model = DTDPG("MlpPolicy", PhasedPointEnv(), **TINY)
-    assert [phase.replay_handling for phase in model.phases] == ["keep", "relabel"]
+def test_the_default_curriculum_is_the_envs_own():
+    model = DTDPG("MlpPolicy", TimeLimit(_CurriculumPhasedEnv(v_max=0.02), max_episode_steps=20), **TINY)
+    assert [(p.name, p.reward_phase, p.replay_handling) for p in model.phases] == [
+        ("destination", "destination", "keep"),
+        ("mqi", "mqi", "relabel"),
+    ]
     assert isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
-    model = DTDPG("MlpPolicy", _PhasesWithoutWeights(), **TINY)
-    assert [phase.replay_handling for phase in model.phases] == ["keep", "keep"]
-    assert not isinstance(model.replay_buffer, RewardComponentsReplayBuffer)
-    model.phases[0] = dataclasses.replace(model.phases[0], n_episodes=2)
-    model.learn(60)  # the transfer (after 2 episodes of 20 steps) happens without reward weights
+    model.learn(60)  # the transfer after 2 episodes of 20 steps
     assert model.curriculum_state["phase_index"] == 1
+    assert model.env.get_attr("reward_phase") == ["mqi"]
 
 
 def test_reinitialize_draws_new_networks_and_keeps_the_rest():

@@ -184,3 +184,61 @@ def test_bad_arguments(kwargs, match):
         rearm_args = {k: v for k, v in kwargs.items() if k in ("sigma", "final_sigma", "decay_episodes")}
         with pytest.raises(ValueError, match=match):
             noise.rearm(**({"sigma": 0.5} | rearm_args))
+
+
+def test_the_process_is_sb3s_ou_noise_of_the_current_scale():
+    """Built through SB3's own constructor: in an episode the draws are exactly SB3's OU noise of that scale."""
+    noise = LinearDecayOUNoise(np.zeros(2), 0.5, 0.1, 4, theta=0.2, dt=0.05)
+    assert type(noise.process) is OrnsteinUhlenbeckActionNoise
+    _run_episode(noise, steps=2)  # episode 1: sigma 0.4
+    reference = OrnsteinUhlenbeckActionNoise(np.zeros(2), np.full(2, 0.4), theta=0.2, dt=0.05)
+    np.random.seed(3)
+    ours = [noise() for _ in range(5)]
+    np.random.seed(3)
+    theirs = [reference() for _ in range(5)]
+    np.testing.assert_array_equal(ours, theirs)
+
+
+def test_a_scale_change_mid_episode_keeps_the_ou_state():
+    """Another env's episode end moves the shared schedule: this env's process goes on from its state."""
+    first = LinearDecayOUNoise(np.zeros(1), 0.5, 0.1, 2)
+    second = copy.deepcopy(first)
+    np.random.seed(0)
+    for _ in range(3):
+        first()
+    state = first.noise_prev.copy()
+    _run_episode(second)  # the shared schedule: sigma 0.5 -> 0.3
+    np.random.seed(1)
+    drawn = first()
+    np.random.seed(1)
+    expected = state + 0.15 * (0.0 - state) * 1e-2 + 0.3 * np.sqrt(1e-2) * np.random.normal(size=(1,))
+    np.testing.assert_allclose(drawn, expected.astype(np.float32), rtol=1e-6)
+
+
+def test_a_noise_pickled_in_the_former_layout_loads_and_goes_on():
+    """Models saved by sb3-dtdpg 0.1.0 pickled the noise with the OU state in its own attributes."""
+    noise = LinearDecayOUNoise(np.zeros(2), 0.5, 0.1, 4)
+    _run_episode(noise)
+    noise()
+    schedule = noise._schedule
+    del schedule.version
+    former = {
+        "_schedule": schedule,
+        "_steps_since_reset": 1,
+        "_theta": 0.15,
+        "_mu": np.zeros(2),
+        "_dt": 1e-2,
+        "_dtype": np.float32,
+        "initial_noise": None,
+        "noise_prev": noise.noise_prev.copy(),
+    }
+    restored = LinearDecayOUNoise.__new__(LinearDecayOUNoise)
+    restored.__setstate__(former)
+    assert restored.episode == 1 and restored._steps_since_reset == 1
+    np.testing.assert_array_equal(restored.current_sigma, noise.current_sigma)
+    np.random.seed(5)
+    expected = noise()
+    np.random.seed(5)
+    np.testing.assert_array_equal(restored(), expected)
+    restored.reset()
+    assert restored.episode == 2

@@ -1,6 +1,5 @@
 """SB3's own test patterns for DDPG (test_cnn, test_dict_env, test_her, test_spaces, test_save_load), run on DTDPG."""
 
-import dataclasses
 from copy import deepcopy
 from typing import Any
 
@@ -228,11 +227,14 @@ def test_dict_vec_frame_stack_and_vec_normalize():
 
 
 def test_vec_normalize_keeps_the_curriculum_of_a_phased_env():
-    """VecNormalize forwards set_reward_phase and reward_weights: the default curriculum switches the env's reward."""
-    venv = VecNormalize(DummyVecEnv([lambda: PhasedPointEnv(max_steps=10)]))
+    """VecNormalize forwards the env's curriculum, set_reward_phase and reward_weights: the curriculum switches the reward."""
+
+    class CurriculumEnv(PhasedPointEnv):
+        default_curriculum = ({"name": "destination", "n_episodes": 3}, {"name": "mqi", "replay_handling": "relabel"})
+
+    venv = VecNormalize(DummyVecEnv([lambda: CurriculumEnv(max_steps=10)]))
     model = DTDPG("MlpPolicy", venv, learning_starts=20, policy_kwargs=dict(net_arch=[8]), seed=0)
     assert [phase.reward_phase for phase in model.phases] == ["destination", "mqi"]
-    model.phases[0] = dataclasses.replace(model.phases[0], n_episodes=3)
     model.learn(60)
     assert model.curriculum_state["phase_index"] == 1
     assert venv.get_attr("reward_phase") == ["mqi"]

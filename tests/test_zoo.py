@@ -137,10 +137,10 @@ def enjoy_episode(output: str) -> tuple[float, int]:
 
 
 # ----------------------------------------------------------------------------- YAML files
-@pytest.mark.parametrize("name", ["dtdpg", "dtdpg_paper", "ddpg", "td3", "sac", "tqc"])
+@pytest.mark.parametrize("name", ["dtdpg", "dtdpg_paper", "ddpg", "ddpg_paper", "td3", "sac", "tqc"])
 def test_every_config_builds_its_model_for_every_env_id(name: str, tmp_path: Path) -> None:
     register_dtdpg()
-    algo = "dtdpg" if name.startswith("dtdpg") else name
+    algo = name.removesuffix("_paper")
     with open(CONFIGS / f"{name}.yml") as f:
         entries = yaml.safe_load(f)
     assert set(NOMA_IDS) <= set(entries)
@@ -156,9 +156,13 @@ def test_every_config_builds_its_model_for_every_env_id(name: str, tmp_path: Pat
             assert [phase.reward_phase for phase in model.phases] == ["destination", "mqi"]
             assert model.curriculum_save_path == manager.save_path
         else:
-            assert manager.env_kwargs == {"reward_phase": "combined", "observation": "goal"}
-        # every file trains on the goal-conditioned observation (9 values per robot) but the paper as printed (6)
-        assert model.observation_space.shape == ((12,) if name == "dtdpg_paper" else (18,))
+            assert manager.env_kwargs == {
+                "reward_phase": "combined",
+                **({"task": "paper"} if name.endswith("_paper") else {"observation": "goal"}),
+            }
+        # every file trains on the goal-conditioned observation (9 values per robot) but the paper's task, whose
+        # state is Eq. (24): position and channel gain per robot (3 values)
+        assert model.observation_space.shape == ((6,) if name.endswith("_paper") else (18,))
         model.env.close()
 
 
@@ -176,18 +180,6 @@ def test_plain_ddpg_baseline_is_plain() -> None:
     assert entry["noise_type"] == "ornstein-uhlenbeck"
     assert "phases" not in entry
     assert entry["env_kwargs"] == {"reward_phase": "combined", "observation": "goal"}
-
-
-def test_zoo_ddpg_is_the_compare_ddpg() -> None:
-    # One definition of the paper's DDPG baseline: the zoo file repeats baselines.py's, value for value.
-    from sb3_dtdpg.baselines import DDPG_KWARGS, DDPG_OU_SIGMA, reward_phase
-
-    with open(CONFIGS / "ddpg.yml") as f:
-        entry = yaml.safe_load(f)[ENV_ID]
-    assert entry["noise_std"] == DDPG_OU_SIGMA
-    assert entry["env_kwargs"]["reward_phase"] == reward_phase("ddpg")
-    for key, value in DDPG_KWARGS.items():
-        assert (eval(entry[key]) if key == "policy_kwargs" else entry[key]) == value, key
 
 
 # ----------------------------------------------------------------------------- ExperimentManager fixes

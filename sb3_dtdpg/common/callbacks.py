@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
+from sb3_dtdpg.common.checks import check_folder
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files, safe_name
 from sb3_dtdpg.common.noise import decaying_noise, noise_sigma, rearm_noise
 from sb3_dtdpg.common.phases import Phase, parse_phases
@@ -59,7 +60,7 @@ class CurriculumTransferCallback(BaseCallback):
     no action noise, a :class:`sb3_dtdpg.common.noise.LinearDecayOUNoise` is created for it.
 
     :param phases: The phases in training order (:class:`sb3_dtdpg.common.phases.Phase` or dicts of their fields).
-    :param save_path: Folder for the per-phase checkpoints (None: no checkpoints).
+    :param save_path: Folder for the per-phase checkpoints (None: no checkpoints); an existing file is refused.
     :param reinitialize_at_transfer: Ablation: re-initialise the networks at each transfer instead of carrying them
         over (needs a model with ``reinitialize()``, e.g. :class:`sb3_dtdpg.DTDPG`).
     :param eval_callbacks: ``EvalCallback`` objects whose eval envs follow the curriculum's reward phase.
@@ -75,6 +76,7 @@ class CurriculumTransferCallback(BaseCallback):
         eval_callbacks: Sequence[EvalCallback] = (),
     ):
         super().__init__(verbose=verbose)
+        check_folder("CurriculumTransferCallback", "save_path", save_path)
         self.phases = parse_phases(phases)
         self.eval_callbacks = list(eval_callbacks)
         self.save_path = None if save_path is None else os.fspath(save_path)
@@ -105,8 +107,7 @@ class CurriculumTransferCallback(BaseCallback):
         """
         if self.save_path is None:
             return None
-        name = safe_name(self.phases[index].name)
-        return os.path.join(self.save_path, f"phase_{index}_{name}.zip")
+        return os.path.join(self.save_path, f"phase_{index}_{safe_name(self.phases[index].name)}.zip")
 
     def _new_history_entry(self, index: int) -> dict[str, Any]:
         return {

@@ -6,7 +6,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import DTypeLike
-from stable_baselines3.common.noise import ActionNoise, OrnsteinUhlenbeckActionNoise, VectorizedActionNoise
+from stable_baselines3.common.noise import (
+    ActionNoise,
+    NormalActionNoise,
+    OrnsteinUhlenbeckActionNoise,
+    VectorizedActionNoise,
+)
 
 
 def _as_sigma(name: str, value: float | np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -30,7 +35,7 @@ def _as_decay_episodes(value: Any) -> int:
 class _EpisodeSchedule:
     """
     The sigma schedule and its episode counter, shared by every copy of one noise
-    (see :class:`LinearDecayOUNoise` on vectorized environments).
+    (see :class:`LinearDecayOUNoise` on vectorized environments). ``version`` counts the changes of ``current``.
     """
 
     def __init__(self, sigma: np.ndarray, final_sigma: np.ndarray, decay_episodes: int) -> None:
@@ -39,6 +44,7 @@ class _EpisodeSchedule:
         self.decay_episodes = decay_episodes
         self.episodes = 0
         self.current = sigma.copy()
+        self.version = 0
 
     def set_episode(self, episodes: int) -> None:
         self.episodes = episodes
@@ -48,9 +54,10 @@ class _EpisodeSchedule:
             self.current = self.final_sigma.copy()
         else:
             self.current = self.sigma + (self.final_sigma - self.sigma) * episodes / self.decay_episodes
+        self.version += 1
 
 
-class LinearDecayOUNoise(OrnsteinUhlenbeckActionNoise):
+class LinearDecayOUNoise(ActionNoise):
     """
     Ornstein-Uhlenbeck action noise whose scale falls linearly per episode, the exploration noise of DT-DPG
     (Zhong et al., "Path Design and Resource Management for NOMA enhanced Indoor Intelligent Robots",
@@ -59,7 +66,9 @@ class LinearDecayOUNoise(OrnsteinUhlenbeckActionNoise):
 
     In episode ``k`` (counting from 0 since construction or the last :meth:`rearm`) the scale is
     ``sigma_k = sigma + (final_sigma - sigma) * k / decay_episodes`` for ``k < decay_episodes``, then
-    exactly ``final_sigma``. :meth:`reset` ends an episode:
+    exactly ``final_sigma``. The process itself is SB3's ``OrnsteinUhlenbeckActionNoise`` of the current scale
+    (:attr:`process`): when the scale changes, a new one of the new scale takes over the process's state
+    (``noise_prev``), so the noise goes on without a jump. :meth:`reset` ends an episode:
     it resets the OU state (as SB3's ``OrnsteinUhlenbeckActionNoise`` does) and advances the schedule.
     A ``reset()`` with no noise drawn since the previous one does not count as an episode: SB3 also calls
     ``reset()`` when the noise is built, when ``VectorizedActionNoise`` wraps it and at the start of every
@@ -98,24 +107,42 @@ class LinearDecayOUNoise(OrnsteinUhlenbeckActionNoise):
         for name, value in (("theta", theta), ("dt", dt)):
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        super().__init__()
         self._schedule = _EpisodeSchedule(
             _as_sigma("sigma", sigma, mean.shape),
             _as_sigma("final_sigma", final_sigma, mean.shape),
             _as_decay_episodes(decay_episodes),
         )
         self._steps_since_reset = 0
-        # The parent stores ``sigma`` as ``self._sigma``: here that is a property of the schedule.
-        ActionNoise.__init__(self)
-        self._theta = theta
-        self._mu = mean
-        self._dt = dt
-        self._dtype = dtype
-        self.initial_noise = initial_noise
-        self.reset()
+        self._process_args: dict[str, Any] = dict(mean=mean, theta=theta, dt=dt, initial_noise=initial_noise, dtype=dtype)
+        self.process = self._new_process()
+
+    def _new_process(self) -> OrnsteinUhlenbeckActionNoise:
+        self._process_version = self._schedule.version
+        return OrnsteinUhlenbeckActionNoise(sigma=self._schedule.current, **self._process_args)
 
     @property
-    def _sigma(self) -> np.ndarray:  # read by OrnsteinUhlenbeckActionNoise.__call__
-        return self._schedule.current
+    def noise_prev(self) -> np.ndarray:
+        """The OU state: the last noise drawn (the initial noise after a reset)."""
+        return self.process.noise_prev
+
+    @property
+    def mean(self) -> np.ndarray:
+        """Mean of the noise."""
+        return self._process_args["mean"]
+
+    @property
+    def theta(self) -> float:
+        return self._process_args["theta"]
+
+    @property
+    def dt(self) -> float:
+        return self._process_args["dt"]
+
+    @property
+    def initial_sigma(self) -> np.ndarray:
+        """The scale the schedule started from (at construction or the last :meth:`rearm`)."""
+        return self._schedule.sigma.copy()
 
     @property
     def current_sigma(self) -> np.ndarray:
@@ -137,14 +164,18 @@ class LinearDecayOUNoise(OrnsteinUhlenbeckActionNoise):
 
     def __call__(self) -> np.ndarray:
         self._steps_since_reset += 1
-        return super().__call__()
+        if self._process_version != self._schedule.version:  # the shared schedule moved: go on at the new scale
+            state = self.process.noise_prev
+            self.process = self._new_process()
+            self.process.noise_prev = state
+        return self.process()
 
     def reset(self) -> None:
         """End an episode: advance the sigma schedule (if any noise was drawn in it) and reset the OU state."""
         if self._steps_since_reset > 0:
             self._schedule.set_episode(self._schedule.episodes + 1)
         self._steps_since_reset = 0
-        super().reset()
+        self.process.reset()
 
     def rearm(
         self,
@@ -160,14 +191,32 @@ class LinearDecayOUNoise(OrnsteinUhlenbeckActionNoise):
         :param final_sigma: New final scale (None: keep the current one)
         :param decay_episodes: New decay horizon in episodes (None: keep the current one)
         """
-        schedule = self._schedule
-        schedule.sigma = _as_sigma("sigma", sigma, self._mu.shape)
+        schedule, shape = self._schedule, self.mean.shape
+        schedule.sigma = _as_sigma("sigma", sigma, shape)
         if final_sigma is not None:
-            schedule.final_sigma = _as_sigma("final_sigma", final_sigma, self._mu.shape)
+            schedule.final_sigma = _as_sigma("final_sigma", final_sigma, shape)
         if decay_episodes is not None:
             schedule.decay_episodes = _as_decay_episodes(decay_episodes)
         schedule.set_episode(0)
         self._steps_since_reset = 0
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        if "process" in state:
+            self.__dict__.update(state)
+            return
+        # Pickled by sb3-dtdpg 0.1.0, whose noise drew the OU process itself (a model saved then still loads)
+        schedule = state["_schedule"]
+        schedule.__dict__.setdefault("version", 0)
+        self._schedule, self._steps_since_reset = schedule, state["_steps_since_reset"]
+        self._process_args = dict(
+            mean=state["_mu"],
+            theta=state["_theta"],
+            dt=state["_dt"],
+            initial_noise=state["initial_noise"],
+            dtype=state["_dtype"],
+        )
+        self.process = self._new_process()
+        self.process.noise_prev = state["noise_prev"]
 
     def __deepcopy__(self, memo: dict[int, Any]) -> "LinearDecayOUNoise":
         # Share the schedule between copies (SB3's VectorizedActionNoise deep-copies the noise per env)
@@ -179,7 +228,7 @@ class LinearDecayOUNoise(OrnsteinUhlenbeckActionNoise):
 
     def __repr__(self) -> str:
         return (
-            f"LinearDecayOUNoise(mu={self._mu}, sigma={self._schedule.sigma}, final_sigma={self._schedule.final_sigma}, "
+            f"LinearDecayOUNoise(mu={self.mean}, sigma={self._schedule.sigma}, final_sigma={self._schedule.final_sigma}, "
             f"decay_episodes={self._schedule.decay_episodes}, episode={self._schedule.episodes})"
         )
 
@@ -255,6 +304,44 @@ def noise_sigma(action_noise: ActionNoise | None) -> float:
         return 0.0
     if isinstance(action_noise, VectorizedActionNoise):
         action_noise = action_noise.base_noise
-    if not hasattr(action_noise, "_sigma"):
+    if isinstance(action_noise, LinearDecayOUNoise):
+        return float(np.mean(action_noise.current_sigma))
+    if not hasattr(action_noise, "_sigma"):  # SB3's noises keep their scale there (no public accessor)
         raise TypeError(f"Cannot read the scale of action noise of type {type(action_noise).__name__}")
     return float(np.mean(action_noise._sigma))
+
+
+def noise_settings(action_noise: ActionNoise | None) -> dict[str, Any] | None:
+    """
+    The settings of an exploration noise as plain data (a run's identity; :func:`sb3_dtdpg.presets.model_settings`).
+
+    :param action_noise: ``model.action_noise``: a :class:`LinearDecayOUNoise`, SB3's ``VectorizedActionNoise``,
+        ``NormalActionNoise`` or ``OrnsteinUhlenbeckActionNoise`` (their constructor arguments, which SB3 keeps in
+        ``_mu``, ``_sigma``, ``_theta`` and ``_dt`` without public accessors), or None
+    :return: ``{"type": "module.Class", ...}`` with lists for arrays and ``n_envs`` for a vectorized noise; None
+    :raises TypeError: for another noise class
+    """
+    if action_noise is None:
+        return None
+    if isinstance(action_noise, VectorizedActionNoise):
+        return {**(noise_settings(action_noise.base_noise) or {}), "n_envs": int(action_noise.n_envs)}
+    values: dict[str, Any] = {"type": f"{type(action_noise).__module__}.{type(action_noise).__qualname__}"}
+    if isinstance(action_noise, LinearDecayOUNoise):
+        values.update(
+            mean=action_noise.mean,
+            sigma=action_noise.initial_sigma,
+            final_sigma=action_noise.final_sigma,
+            decay_episodes=action_noise.decay_episodes,
+            theta=action_noise.theta,
+            dt=action_noise.dt,
+        )
+    elif isinstance(action_noise, (NormalActionNoise, OrnsteinUhlenbeckActionNoise)):
+        values.update(mean=action_noise._mu, sigma=action_noise._sigma)
+        if isinstance(action_noise, OrnsteinUhlenbeckActionNoise):
+            values.update(theta=action_noise._theta, dt=action_noise._dt)
+    else:
+        raise TypeError(f"Cannot describe action noise of type {type(action_noise).__name__}")
+    return {
+        key: np.asarray(value, dtype=np.float64).tolist() if isinstance(value, np.ndarray) else value
+        for key, value in values.items()
+    }

@@ -187,3 +187,24 @@ def single_phase(
     return parse_phases(
         [Phase("train", reward_phase=None, sigma=sigma, final_sigma=final_sigma, decay_episodes=decay_episodes)]
     )
+
+
+#: The noise of the single phase of :func:`default_curriculum`: the paper's initial OU scale, decaying to 0.1 over
+#: 300 episodes.
+SINGLE_PHASE_NOISE: tuple[float, float, int] = (0.5, 0.1, 300)
+
+
+def default_curriculum(env: Any) -> list[Phase]:
+    """
+    The curriculum ``DTDPG(phases=None)`` trains through.
+
+    :param env: the training env (an SB3 ``VecEnv``), or None
+    :return: the env's own curriculum when it offers one (an attribute ``default_curriculum``: a sequence of
+        :class:`Phase` objects or dicts of their fields, or a method returning one), else a single phase that
+        leaves the env's reward alone, with OU noise decaying from 0.5 to 0.1 over 300 episodes
+    """
+    if env is not None and env.has_attr("default_curriculum"):
+        offered = env.get_attr("default_curriculum", indices=[0])[0]
+        return parse_phases(offered() if callable(offered) else offered)
+    sigma, final_sigma, decay_episodes = SINGLE_PHASE_NOISE
+    return single_phase(sigma=sigma, final_sigma=final_sigma, decay_episodes=decay_episodes)

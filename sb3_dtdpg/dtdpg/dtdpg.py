@@ -4,7 +4,6 @@ from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
 import torch as th
-from gymnasium import spaces
 from stable_baselines3 import DDPG
 from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, EvalCallback
@@ -14,11 +13,11 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 
 from sb3_dtdpg.common.buffers import reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
+from sb3_dtdpg.common.checks import check_folder, check_off_policy_settings, check_total_timesteps
 from sb3_dtdpg.common.noise import decaying_noise
-from sb3_dtdpg.common.phases import Phase, parse_phases
+from sb3_dtdpg.common.phases import Phase, default_curriculum, parse_phases
 from sb3_dtdpg.dtdpg.lean import LeanStep
 from sb3_dtdpg.dtdpg.policies import CnnPolicy, DTDPGPolicy, MlpPolicy, MultiInputPolicy
-from sb3_dtdpg.missions import MissionLoggerCallback, default_curriculum
 
 SelfDTDPG = TypeVar("SelfDTDPG", bound="DTDPG")
 
@@ -41,12 +40,11 @@ class DTDPG(LeanStep, DDPG):
     to :meth:`learn` evaluates on the current phase's reward (its eval env follows the curriculum) and its
     ``best_model.zip`` is the best on the last phase's reward; Optuna trial callbacks keep their env's reward.
 
-    Defaults are the settings that trained best in ``benchmarks/`` (docs/BENCHMARKS.md, "DT-DPG learning"):
-    learning rate 1e-3, buffer 2e5, 2000 warm-up steps, batch 128, tau 0.005, gamma 0.95, 3-step returns and
-    ``[128, 128]`` hidden layers (the policy's default), with the paper's OU scales (0.5 then 0.4, decaying).
-    The paper's Table I values (learning rate 1e-4, batch 64, tau 0.002, buffer 5e4, gamma 1) are the preset
-    ``zoo_configs/dtdpg_paper.yml`` (``--hyperparams paper`` on the command line); with them DT-DPG learns
-    nothing within the paper's 500 episodes on ``NomaRadioMap-v0``.
+    The constructor's defaults are SB3's DDPG defaults (generic settings; the batch-norm policy's own hidden
+    layers), with one phase of decaying OU noise unless the env offers its own curriculum. The settings for the
+    mission env (``noma_radiomap``) are named presets: ``DTDPG("MlpPolicy", env, **preset("tuned"))`` with
+    :func:`sb3_dtdpg.presets.preset`, the best measured settings (docs/BENCHMARKS.md), or ``preset("paper")``,
+    the paper's Table I (docs/ZOO.md, "Presets").
 
     :param policy: The policy model to use (``"MlpPolicy"``, ``"CnnPolicy"`` for images, ``"MultiInputPolicy"`` for
         ``Dict`` observations: the batch-norm policy with a flatten, CNN or combined features extractor)
@@ -77,7 +75,6 @@ class DTDPG(LeanStep, DDPG):
         at a cost of more complexity.
         See https://github.com/DLR-RM/stable-baselines3/issues/37#issuecomment-637501195
     :param n_steps: When n_step > 1, uses n-step return (with the NStepReplayBuffer) when updating the Q-value network.
-        None (default): 3, or 1 on Dict observation spaces, where SB3 has no n-step returns
     :param tensorboard_log: the log location for tensorboard (if None, no logging)
     :param policy_kwargs: additional arguments to be passed to the policy on creation
         (``net_arch``, ``activation_fn``, ``batch_norm_momentum``, ``batch_norm_eps``, ...)
@@ -87,11 +84,10 @@ class DTDPG(LeanStep, DDPG):
     :param device: Device (cpu, cuda, ...) on which the code should be run.
         Setting it to auto, the code will be run on the GPU if possible.
     :param phases: The curriculum: :class:`~sb3_dtdpg.common.phases.Phase` objects or dicts of their fields
-        (YAML). None: :func:`sb3_dtdpg.missions.default_curriculum`, the paper's two phases on an env with
-        reward phases (``set_reward_phase``), the stored rewards relabelled at the transfer when the env has
-        ``reward_weights`` (kept otherwise), else a single phase that leaves the reward alone.
+        (YAML). None: :func:`~sb3_dtdpg.common.phases.default_curriculum`, the env's own ``default_curriculum``
+        when it offers one, else a single phase that leaves the reward alone.
     :param curriculum_save_path: Folder where the model is saved at the end of each phase
-        (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved
+        (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved. An existing file there is refused.
     :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
         them over (ablation of the transfer, :meth:`reinitialize`)
     :param lean: Train and act with the lean step (:mod:`sb3_dtdpg.dtdpg.lean`): SB3's TD3/DDPG update and
@@ -113,18 +109,18 @@ class DTDPG(LeanStep, DDPG):
         policy: str | type[DTDPGPolicy],
         env: GymEnv | str,
         learning_rate: float | Schedule = 1e-3,
-        buffer_size: int = 200_000,
-        learning_starts: int = 2000,
-        batch_size: int = 128,
+        buffer_size: int = 1_000_000,
+        learning_starts: int = 100,
+        batch_size: int = 256,
         tau: float = 0.005,
-        gamma: float = 0.95,
+        gamma: float = 0.99,
         train_freq: int | tuple[int, str] = 1,
         gradient_steps: int = 1,
         action_noise: ActionNoise | None = None,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         optimize_memory_usage: bool = False,
-        n_steps: int | None = None,
+        n_steps: int = 1,
         tensorboard_log: str | None = None,
         policy_kwargs: dict[str, Any] | None = None,
         verbose: int = 0,
@@ -136,9 +132,7 @@ class DTDPG(LeanStep, DDPG):
         lean: bool = True,
         _init_setup_model: bool = True,
     ):
-        super().__init__(
-            policy=policy,
-            env=env,
+        settings: dict[str, Any] = dict(
             learning_rate=learning_rate,
             buffer_size=buffer_size,
             learning_starts=learning_starts,
@@ -147,20 +141,25 @@ class DTDPG(LeanStep, DDPG):
             gamma=gamma,
             train_freq=train_freq,
             gradient_steps=gradient_steps,
+            n_steps=n_steps,
+            policy_kwargs=policy_kwargs,
+        )
+        check_off_policy_settings("DTDPG", settings)
+        check_folder("DTDPG", "curriculum_save_path", curriculum_save_path)
+        super().__init__(
+            policy=policy,
+            env=env,
             action_noise=action_noise,
             replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs,
             optimize_memory_usage=optimize_memory_usage,
-            n_steps=3 if n_steps is None else n_steps,
             tensorboard_log=tensorboard_log,
-            policy_kwargs=policy_kwargs,
             verbose=verbose,
             seed=seed,
             device=device,
             _init_setup_model=False,
+            **settings,
         )
-        if n_steps is None and isinstance(getattr(self, "observation_space", None), spaces.Dict):
-            self.n_steps = 1  # SB3's n-step buffer does not take Dict observations
         self.curriculum_save_path = curriculum_save_path
         self.lean = lean
         self.reinitialize_at_transfer = reinitialize_at_transfer
@@ -169,7 +168,7 @@ class DTDPG(LeanStep, DDPG):
         if phases is not None:
             self.phases = parse_phases(phases)
         else:
-            self.phases = default_curriculum(self.env)
+            self.phases = default_curriculum(self.env)  # the env's own, or one phase
             if action_noise is not None:  # the user's noise is used as is: the default phases leave it alone
                 self.phases = [dataclasses.replace(p, sigma=None, final_sigma=None, decay_episodes=None) for p in self.phases]
 
@@ -193,11 +192,21 @@ class DTDPG(LeanStep, DDPG):
         )
         with warnings.catch_warnings():
             if configured_n_step:
-                # SB3 warns that n_steps is ignored whenever a buffer class is given, also when the class is the
-                # n-step buffer it picked itself before a save (load) or our relabelling n-step buffer: the
+                # SB3 warns that n_steps is ignored whenever a buffer class is given, also when the class is an n-step
+                # buffer set up with these n_steps (SB3's own, picked before a save, or the relabelling one): the
                 # returns are set up, so the warning would be wrong here
-                warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored", category=UserWarning)
+                warnings.simplefilter("ignore", UserWarning)
             super()._setup_model()
+
+    def set_random_seed(self, seed: int | None = None) -> None:
+        """
+        Seed the random generators (SB3's ``set_random_seed``), except while :meth:`reinitialize` builds new
+        networks: then the generators go on from where they are.
+
+        :param seed: the seed (None: no seeding)
+        """
+        if not getattr(self, "_drawing_new_networks", False):
+            super().set_random_seed(seed)
 
     def reinitialize(self) -> None:
         """
@@ -208,11 +217,11 @@ class DTDPG(LeanStep, DDPG):
         generators are not re-seeded (re-seeding would replay their streams): the new weights are drawn from
         where the streams are. The policy is left in evaluation mode, the mode SB3 collects rollouts in.
         """
-        seed, self.seed = self.seed, None  # _setup_model() calls set_random_seed(self.seed), a no-op for None
+        self._drawing_new_networks = True  # _setup_model() seeds the generators: see set_random_seed()
         try:
             self._setup_model()
         finally:
-            self.seed = seed
+            self._drawing_new_networks = False
         self.policy.set_training_mode(False)
 
     def learn(
@@ -224,6 +233,20 @@ class DTDPG(LeanStep, DDPG):
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> SelfDTDPG:
+        """
+        SB3's ``learn`` with the curriculum (:class:`~sb3_dtdpg.common.callbacks.CurriculumTransferCallback`) added
+        before the given callbacks. Mission figures are logged by passing
+        :class:`sb3_dtdpg.MissionLoggerCallback` as a callback.
+
+        :param total_timesteps: the number of env steps to train for (a positive integer)
+        :param callback: callback(s) called at every step
+        :param log_interval: episodes between log dumps
+        :param tb_log_name: the name of the run for TensorBoard logging
+        :param reset_num_timesteps: whether or not to reset the current timestep number (used in logging)
+        :param progress_bar: display a progress bar using tqdm and rich
+        :return: the trained model
+        """
+        check_total_timesteps(total_timesteps)
         user_callbacks: list[BaseCallback] = []
         for user_callback in callback if isinstance(callback, list) else [callback]:
             if user_callback is not None:
@@ -237,7 +260,7 @@ class DTDPG(LeanStep, DDPG):
             verbose=self.verbose,
             eval_callbacks=_curriculum_evaluations(user_callbacks),
         )
-        callbacks: list[BaseCallback] = [curriculum, MissionLoggerCallback(), *user_callbacks]
+        callbacks: list[BaseCallback] = [curriculum, *user_callbacks]
         return super().learn(
             total_timesteps=total_timesteps,
             callback=CallbackList(callbacks),

@@ -1,0 +1,109 @@
+"""Range checks of the numeric settings of SB3's off-policy algorithms, each error naming the field and its value."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+__all__ = ["check_folder", "check_off_policy_settings", "check_total_timesteps"]
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def _is_real(value: Any) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _int_at_least(owner: str, name: str, value: Any, low: int) -> None:
+    if not _is_int(value) or value < low:
+        raise ValueError(f"{owner}: {name} must be an integer >= {low}, got {value!r}")
+
+
+def _learning_rate(owner: str, value: Any) -> None:
+    initial = value(1.0) if callable(value) else value  # SB3 schedules start at progress_remaining = 1
+    if not _is_real(initial) or initial <= 0:
+        what = "the initial value of the learning-rate schedule" if callable(value) else "learning_rate"
+        raise ValueError(f"{owner}: {what} must be a finite number > 0, got {initial!r}")
+
+
+def _train_freq(owner: str, value: Any) -> None:
+    if isinstance(value, (tuple, list)):
+        if len(value) != 2:
+            raise ValueError(f"{owner}: train_freq must be an integer or a pair (frequency, unit), got {value!r}")
+        frequency, unit = value
+    else:
+        frequency, unit = value, "step"
+    _int_at_least(owner, "train_freq", frequency, 1)
+    if getattr(unit, "value", unit) not in ("step", "episode"):  # a string or SB3's TrainFrequencyUnit
+        raise ValueError(f"{owner}: the unit of train_freq must be 'step' or 'episode', got {unit!r}")
+
+
+def _net_arch(owner: str, policy_kwargs: Mapping[str, Any] | None) -> None:
+    net_arch = (policy_kwargs or {}).get("net_arch")
+    if net_arch is None:
+        return
+    layers = [*net_arch.get("pi", []), *net_arch.get("qf", [])] if isinstance(net_arch, Mapping) else net_arch
+    if not isinstance(layers, (list, tuple)) or any(not _is_int(units) or units < 1 for units in layers):
+        raise ValueError(f"{owner}: policy_kwargs['net_arch'] must hold layer sizes >= 1, got {net_arch!r}")
+
+
+#: setting -> check(owner, value); settings that are absent or None are not checked
+_CHECKS: dict[str, Callable[[str, Any], None]] = {
+    "learning_rate": _learning_rate,
+    "buffer_size": lambda owner, value: _int_at_least(owner, "buffer_size", value, 1),
+    "learning_starts": lambda owner, value: _int_at_least(owner, "learning_starts", value, 0),
+    "batch_size": lambda owner, value: _int_at_least(owner, "batch_size", value, 1),
+    "n_steps": lambda owner, value: _int_at_least(owner, "n_steps", value, 1),
+    "train_freq": _train_freq,
+    "policy_kwargs": _net_arch,
+}
+
+
+def check_off_policy_settings(owner: str, settings: Mapping[str, Any]) -> None:
+    """
+    Range-check the numeric constructor arguments of an SB3 off-policy algorithm (DDPG, TD3, SAC, TQC, DTDPG):
+    ``learning_rate`` (a schedule's initial value) finite and > 0, ``buffer_size``, ``batch_size`` and ``n_steps``
+    >= 1, ``learning_starts`` >= 0, ``gamma`` in [0, 1], ``tau`` in (0, 1], ``train_freq`` >= 1 (with unit
+    ``"step"`` or ``"episode"``), ``gradient_steps`` >= 0 (0: collect only) or -1 (SB3: as many as env steps),
+    and the layer sizes of ``policy_kwargs["net_arch"]`` >= 1.
+
+    :param owner: what the settings are for, at the start of the message (e.g. ``"DTDPG"``)
+    :param settings: the constructor arguments; absent or None ones are not checked
+    :raises ValueError: naming the first setting out of range and its value
+    """
+    for name, check in _CHECKS.items():
+        if settings.get(name) is not None:
+            check(owner, settings[name])
+    gamma, tau, gradient_steps = settings.get("gamma"), settings.get("tau"), settings.get("gradient_steps")
+    if gamma is not None and (not _is_real(gamma) or not 0 <= gamma <= 1):
+        raise ValueError(f"{owner}: gamma must be a number in [0, 1], got {gamma!r}")
+    if tau is not None and (not _is_real(tau) or not 0 < tau <= 1):
+        raise ValueError(f"{owner}: tau must be a number in (0, 1], got {tau!r}")
+    if gradient_steps is not None and (not _is_int(gradient_steps) or gradient_steps < -1):
+        raise ValueError(f"{owner}: gradient_steps must be an integer >= 0, or -1, got {gradient_steps!r}")
+
+
+def check_total_timesteps(total_timesteps: Any) -> None:
+    """
+    :param total_timesteps: the budget of ``learn()``
+    :raises ValueError: unless it is a positive integer
+    """
+    if not _is_int(total_timesteps) or total_timesteps < 1:
+        raise ValueError(f"learn(): total_timesteps must be a positive integer, got {total_timesteps!r}")
+
+
+def check_folder(owner: str, name: str, path: str | os.PathLike[str] | None) -> None:
+    """
+    :param owner: what the setting is for, at the start of the message
+    :param name: the setting
+    :param path: a folder to write into later (None: none); it may not exist yet
+    :raises ValueError: when the path is an existing file (or anything else that is not a folder)
+    """
+    if path is not None and os.path.lexists(path) and not os.path.isdir(path):
+        raise ValueError(f"{owner}: {name} must be a folder, got the file {os.fspath(path)!r}")

@@ -1,0 +1,89 @@
+"""Every numeric setting of DTDPG, of learn() and of the baselines (through make_model) is range-checked where it
+enters, the error naming the field and the value."""
+
+import re
+
+import pytest
+
+from sb3_dtdpg import DTDPG
+from sb3_dtdpg.baselines import make_env, make_model
+
+TINY = dict(policy_kwargs=dict(net_arch=[8]), learning_starts=10, batch_size=8)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(buffer_size=0), "buffer_size must be an integer >= 1, got 0"),
+        (dict(buffer_size=-1), "buffer_size must be an integer >= 1, got -1"),
+        (dict(buffer_size=1e5), "buffer_size must be an integer >= 1, got 100000.0"),
+        (dict(batch_size=0), "batch_size must be an integer >= 1, got 0"),
+        (dict(n_steps=0), "n_steps must be an integer >= 1, got 0"),
+        (dict(n_steps=-3), "n_steps must be an integer >= 1, got -3"),
+        (dict(gamma=1.5), "gamma must be a number in [0, 1], got 1.5"),
+        (dict(gamma=float("nan")), "gamma must be a number in [0, 1], got nan"),
+        (dict(tau=2), "tau must be a number in (0, 1], got 2"),
+        (dict(tau=0.0), "tau must be a number in (0, 1], got 0.0"),
+        (dict(policy_kwargs=dict(net_arch=[0])), "policy_kwargs['net_arch'] must hold layer sizes >= 1, got [0]"),
+        (dict(policy_kwargs=dict(net_arch=dict(pi=[8], qf=[-1]))), "policy_kwargs['net_arch'] must hold layer sizes"),
+        (dict(learning_rate=float("inf")), "learning_rate must be a finite number > 0, got inf"),
+        (dict(learning_rate=float("nan")), "learning_rate must be a finite number > 0, got nan"),
+        (dict(learning_rate=-1), "learning_rate must be a finite number > 0, got -1"),
+        (dict(learning_rate=0.0), "learning_rate must be a finite number > 0, got 0.0"),
+        (
+            dict(learning_rate=lambda progress: float("inf")),
+            "the initial value of the learning-rate schedule must be a finite",
+        ),
+        (dict(learning_starts=-1), "learning_starts must be an integer >= 0, got -1"),
+        (dict(train_freq=0), "train_freq must be an integer >= 1, got 0"),
+        (dict(train_freq=(2, "epoch")), "the unit of train_freq must be 'step' or 'episode', got 'epoch'"),
+        (dict(gradient_steps=-2), "gradient_steps must be an integer >= 0, or -1, got -2"),
+        (dict(gradient_steps=1.5), "gradient_steps must be an integer >= 0, or -1, got 1.5"),
+    ],
+)
+def test_dtdpg_constructor_ranges(kwargs, message):
+    with pytest.raises(ValueError, match=re.escape(f"DTDPG: {message}")):
+        DTDPG("MlpPolicy", "Pendulum-v1", **kwargs)
+
+
+@pytest.mark.parametrize("total_timesteps", [-5, 0, 2.5, "100", True])
+def test_learn_needs_a_positive_integer_budget(total_timesteps):
+    model = DTDPG("MlpPolicy", "Pendulum-v1", **TINY)
+    with pytest.raises(ValueError, match=re.escape(f"total_timesteps must be a positive integer, got {total_timesteps!r}")):
+        model.learn(total_timesteps)
+    assert model.num_timesteps == 0
+
+
+def test_a_curriculum_save_path_that_is_a_file_is_refused_at_construction(tmp_path):
+    path = tmp_path / "taken"
+    path.write_text("another run's file")
+    with pytest.raises(ValueError, match="curriculum_save_path must be a folder, got the file"):
+        DTDPG("MlpPolicy", "Pendulum-v1", curriculum_save_path=str(path), **TINY)
+    assert path.read_text() == "another run's file"
+    DTDPG("MlpPolicy", "Pendulum-v1", curriculum_save_path=str(tmp_path / "new"), **TINY)  # a folder to be made
+
+
+@pytest.mark.parametrize(
+    "algo, kwargs, message",
+    [
+        ("ddpg", dict(learning_rate=float("inf")), "ddpg: learning_rate must be a finite number > 0, got inf"),
+        ("td3", dict(batch_size=0), "td3: batch_size must be an integer >= 1, got 0"),
+        ("sac", dict(gamma=2.0), "sac: gamma must be a number in [0, 1], got 2.0"),
+        ("tqc", dict(policy_kwargs=dict(net_arch=[0])), "tqc: policy_kwargs['net_arch'] must hold layer sizes >= 1"),
+        ("dtdpg", dict(buffer_size=-1), "dtdpg: buffer_size must be an integer >= 1, got -1"),
+    ],
+)
+def test_make_model_checks_every_algorithm(algo, kwargs, message):
+    env = make_env(algo, env_kwargs={"scenario": "small"})
+    with pytest.raises(ValueError, match=re.escape(message)):
+        make_model(algo, env, **kwargs)
+    with pytest.raises(ValueError, match=re.escape("learning_rate must be a finite number > 0, got -1.0")):
+        make_model(algo, env, learning_rate=-1.0)
+
+
+def test_the_curriculum_callback_refuses_a_file_as_its_folder(tmp_path):
+    from sb3_dtdpg import CurriculumTransferCallback, Phase
+
+    (tmp_path / "taken").write_text("")
+    with pytest.raises(ValueError, match="CurriculumTransferCallback: save_path must be a folder, got the file"):
+        CurriculumTransferCallback([Phase("train", reward_phase=None)], save_path=tmp_path / "taken")
