@@ -166,6 +166,10 @@ def run_compare(
         )
         tables.save_tables(summary, records, out, "results", title)
         tables.print_table(summary, title)
+        if not records.empty:
+            plots.plot_statistics(
+                records, out, f"{budget.scenario or 'mall'}, {budget.name} budget ({budget.episodes} episodes)"
+            )
 
         groups: dict[str, list[Path]] = {}
         for spec in specs:
