@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from sb3_dtdpg.common.files import write_json
+
 #: Changes to the base set-up. Keys: ``algo`` (dtdpg, ddpg, td3, sac), ``kwargs`` (algorithm kwargs merged into the
 #: base, ``policy_kwargs`` merged key by key), ``phase`` (fields of the phase-1 :class:`Phase`: the OU schedule),
 #: ``noise`` ("ou" or "normal" with ``noise_sigma``), ``env`` (env kwargs), ``n_envs`` (train on the batched vector env
@@ -266,16 +268,6 @@ def summary_rows(out: str, names: list[str], seeds: list[int]) -> list[str]:
     return rows
 
 
-def _write_json(path: str, record: dict[str, Any]) -> None:
-    from sb3_dtdpg.common.files import atomic_write
-
-    def write(tmp: str) -> None:
-        with open(tmp, "w") as f:
-            json.dump(record, f)
-
-    atomic_write(path, write)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--configs", nargs="+", default=["base"], help="configurations to run (see --list)")
@@ -311,7 +303,7 @@ def main() -> None:
             for future in done:
                 name, seed = jobs.pop(future)
                 record = future.result()
-                _write_json(os.path.join(args.out, f"{name}_seed{seed}.json"), record)
+                write_json(os.path.join(args.out, f"{name}_seed{seed}.json"), record)
                 evals = " ".join(f"{e['success']:.2f}" for e in record["evals"])
                 print(
                     f"{time.strftime('%H:%M:%S')} {name} seed {seed}: train95 {record['train95']} eval95 {record['eval95']} "

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from sb3_dtdpg.common.files import write_json
+
 
 def _make_env(env_id: str, observation: str, **kwargs: Any) -> Any:
     import gymnasium as gym
@@ -181,16 +183,6 @@ def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argp
     return lines
 
 
-def _write_json(path: str, record: dict[str, Any]) -> None:
-    from sb3_dtdpg.common.files import atomic_write
-
-    def write(tmp: str) -> None:
-        with open(tmp, "w") as f:
-            json.dump(record, f)
-
-    atomic_write(path, write)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--methods", nargs="+", default=["dtdpg", "ddpg"], choices=["dtdpg", "ddpg"])
@@ -246,7 +238,7 @@ def main() -> None:
             for future in done:
                 method, seed = jobs.pop(future)
                 record = future.result()
-                _write_json(path(method, seed), record)
+                write_json(path(method, seed), record)
                 print(
                     f"{time.strftime('%H:%M:%S')} {method} seed {seed}: test success {record['test_success']:.0%}, "
                     f"MQI {record['test_mqi']:.1f} ({record['seconds']:.0f} s"

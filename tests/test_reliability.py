@@ -15,6 +15,7 @@ import yaml
 from noma_radiomap import load_scenario
 from sb3_dtdpg.cli import main
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files, safe_name
+from sb3_dtdpg.experiments import pool as pool_module
 from sb3_dtdpg.experiments import runs
 from sb3_dtdpg.experiments.compare import compare_specs, run_compare
 from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
@@ -198,7 +199,7 @@ def test_run_many_uses_the_pool_that_ends_with_its_parent():
     pool = worker_pool(1)
     try:
         assert pool.submit(os.getppid).result() == os.getpid()
-        assert pool._initializer is runs._die_with_parent
+        assert pool._initializer is pool_module._die_with_parent
     finally:
         pool.shutdown()
 

@@ -1,7 +1,6 @@
 """The curriculum transfer of DT-DPG between reward phases (any env with ``set_reward_phase``)."""
 
 import os
-import re
 import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -9,7 +8,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
-from sb3_dtdpg.common.files import atomic_write, remove_temp_files
+from sb3_dtdpg.common.files import atomic_write, remove_temp_files, safe_name
 from sb3_dtdpg.common.noise import decaying_noise, noise_sigma, rearm_noise
 from sb3_dtdpg.common.phases import Phase, parse_phases
 
@@ -106,7 +105,7 @@ class CurriculumTransferCallback(BaseCallback):
         """
         if self.save_path is None:
             return None
-        name = re.sub(r"[^A-Za-z0-9_.-]", "_", self.phases[index].name)
+        name = safe_name(self.phases[index].name)
         return os.path.join(self.save_path, f"phase_{index}_{name}.zip")
 
     def _new_history_entry(self, index: int) -> dict[str, Any]:

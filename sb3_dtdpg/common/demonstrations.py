@@ -1,19 +1,12 @@
 """Replay seeded with a demonstrator's episodes (an extension of DT-DPG, in the spirit of DDPGfD)."""
 
-from typing import Any, Protocol
-
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from sb3_dtdpg.evaluation import Planner
 
-class Demonstrator(Protocol):
-    """What :class:`DemonstrationCallback` needs of a demonstrator (a planner, for instance)."""
-
-    def reset(self, env: Any) -> None:
-        """Plan for the episode that ``env`` (the unwrapped env, just reset) starts."""
-
-    def act(self, env: Any, observation: np.ndarray) -> np.ndarray:
-        """The action for the current state of ``env``."""
+#: What :class:`DemonstrationCallback` needs of a demonstrator: the :class:`sb3_dtdpg.evaluation.Planner` protocol.
+Demonstrator = Planner
 
 
 class DemonstrationCallback(BaseCallback):

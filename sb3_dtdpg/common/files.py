@@ -1,14 +1,18 @@
-"""Writing output files safely: atomic replacement, leftover temporary files, file names from user text."""
+"""Writing output files safely: atomic replacement, JSON records, leftover temporary files, file names from user text."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-__all__ = ["TEMP_PREFIX", "atomic_write", "remove_temp_files", "safe_name"]
+import numpy as np
+
+__all__ = ["TEMP_PREFIX", "atomic_write", "json_default", "remove_temp_files", "safe_name", "write_json"]
 
 #: Temporary files are named ``.<target>.<random>.tmp`` in the target's folder.
 TEMP_PREFIX = "."
@@ -40,6 +44,34 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> 
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def json_default(value: Any) -> Any:
+    """
+    ``json.dumps``'s ``default`` for numpy values: scalars become Python numbers, arrays lists.
+
+    :param value: a value ``json`` cannot write
+    :return: its JSON-ready form
+    :raises TypeError: for anything else
+    """
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def write_json(path: str | os.PathLike[str], data: Any, indent: int | None = None) -> Path:
+    """
+    Write a JSON file atomically (:func:`atomic_write`): a reader sees the complete record or the previous one.
+
+    :param path: the target file
+    :param data: the record (numpy values allowed, :func:`json_default`)
+    :param indent: ``json.dumps``'s indent
+    :return: the target path
+    """
+    text = json.dumps(data, indent=indent, default=json_default)
+    return atomic_write(path, lambda tmp: Path(tmp).write_text(text))
 
 
 def remove_temp_files(folder: str | os.PathLike[str]) -> list[Path]:

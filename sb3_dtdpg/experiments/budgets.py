@@ -1,0 +1,88 @@
+"""The scale of an experiment (:class:`Budget`, by name in :data:`BUDGETS`) and the check that a run's budget can train."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from sb3_dtdpg.experiments.specs import RunSpec
+
+__all__ = ["BUDGETS", "PUBLIC_BUDGETS", "Budget", "check_budget", "get_budget"]
+
+
+@dataclass(frozen=True)
+class Budget:
+    """
+    The scale of an experiment.
+
+    :param name: budget name (``--budget``)
+    :param episodes: training episodes per run (the paper: 500)
+    :param long_episodes: the longer "reality" training of Table II (the paper: 700)
+    :param eval_episodes: test episodes per run (the paper: 20, with Rayleigh fading)
+    :param seeds: default number of seeds per configuration
+    :param scenario: scenario name (None: the env's default, ``mall``)
+    """
+
+    name: str
+    episodes: int
+    long_episodes: int
+    eval_episodes: int
+    seeds: int
+    scenario: str | None = None
+
+
+#: ``tiny`` is a smoke run on the ``small`` scenario; ``default`` fits ``compare`` in <= 15 minutes on a
+#: 2-core machine (measured, docs/RESULTS.md); ``paper`` is the paper's scale; ``reduced`` is the paper's
+#: experiments on the ``small`` scenario with 200/280 episodes instead of 500/700 (what a 2-core machine
+#: runs in about an hour, docs/RESULTS.md). ``_micro`` is for the tests.
+BUDGETS: dict[str, Budget] = {
+    "_micro": Budget("_micro", episodes=3, long_episodes=4, eval_episodes=2, seeds=2, scenario="small"),
+    "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small"),
+    "reduced": Budget("reduced", episodes=200, long_episodes=280, eval_episodes=20, seeds=3, scenario="small"),
+    "default": Budget("default", episodes=250, long_episodes=350, eval_episodes=20, seeds=1),
+    "small": Budget("small", episodes=200, long_episodes=280, eval_episodes=20, seeds=3),
+    "paper": Budget("paper", episodes=500, long_episodes=700, eval_episodes=20, seeds=5),
+}
+
+
+#: The budgets a user picks by name (``_micro`` is for the tests).
+PUBLIC_BUDGETS: tuple[str, ...] = tuple(name for name in BUDGETS if not name.startswith("_"))
+
+
+def get_budget(budget: str | Budget) -> Budget:
+    """
+    :param budget: a name of :data:`BUDGETS` or a :class:`Budget`
+    :return: the budget
+    :raises ValueError: naming the known budgets when the name is unknown
+    """
+    if isinstance(budget, Budget):
+        return budget
+    if budget not in BUDGETS:
+        raise ValueError(f"budget must be one of {', '.join(PUBLIC_BUDGETS)}, got {budget!r}")
+    return BUDGETS[budget]
+
+
+def check_budget(spec: RunSpec) -> None:
+    """
+    :param spec: a run on a mission env
+    :raises ValueError: when its budget cannot train: at most ``episodes x mission.max_steps`` env steps (or
+        ``timesteps``), no more than the algorithm's ``learning_starts`` (:func:`sb3_dtdpg.baselines.check_training_budget`)
+    """
+    import gymnasium as gym
+
+    from noma_radiomap import load_scenario
+    from sb3_dtdpg.baselines import check_training_budget, hyperparameter
+
+    learning_starts = int(hyperparameter(spec.algo, "learning_starts", spec.hyperparams))
+    if spec.timesteps is not None:
+        check_training_budget(spec.timesteps, learning_starts, f"{spec.timesteps} env steps ({spec.run_id})")
+        return
+    scenario = spec.scenario or gym.spec(spec.env_id).kwargs.get("scenario", "mall")
+    max_steps = int(load_scenario(scenario).mission.max_steps)
+    check_training_budget(
+        spec.episodes * max_steps,
+        learning_starts,
+        f"{spec.episodes} episodes of at most {max_steps} steps ({spec.run_id})",
+        "train for more episodes (a larger budget)",
+    )

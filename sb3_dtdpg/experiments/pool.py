@@ -1,0 +1,181 @@
+"""The worker processes of :func:`sb3_dtdpg.experiments.runs.run_many` and its progress display.
+
+Workers are spawned processes (no state inherited from the parent) that end when their parent process ends,
+however it ends, so that killing a job never leaves workers running its queued runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import math
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sb3_dtdpg.experiments.specs import RunSpec
+from sb3_dtdpg.experiments.storage import read_progress
+
+__all__ = ["RunBars", "RunReport", "run_in_pool", "worker_pool"]
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """
+    Worker initialiser: end this process when its parent ends, however it ends (SIGTERM, SIGKILL, a crash).
+    On Linux the kernel sends SIGKILL (``PR_SET_PDEATHSIG``); elsewhere a thread polls the parent's pid.
+    """
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
+    if os.getppid() != parent_pid:  # the parent ended before the line above
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def worker_pool(n_workers: int) -> ProcessPoolExecutor:
+    """
+    The process pool of :func:`run_in_pool`: spawned processes (no state inherited from the parent) that end when
+    the parent process ends, so that killing a job never leaves workers running its queued runs.
+
+    :param n_workers: number of processes
+    :return: the executor
+    """
+    context = multiprocessing.get_context("spawn")
+    return ProcessPoolExecutor(
+        max_workers=n_workers, mp_context=context, initializer=_die_with_parent, initargs=(os.getpid(),)
+    )
+
+
+@dataclass
+class RunReport:
+    """
+    What :func:`sb3_dtdpg.experiments.runs.run_many` did: run ids finished now, skipped (already finished) and
+    failed (with the error).
+    """
+
+    finished: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)
+    wall_s: float = math.nan
+
+
+def run_in_pool(
+    work: Callable[..., tuple[str, float]],
+    jobs: Sequence[tuple[RunSpec, Any]],
+    out: str | Path,
+    n_workers: int,
+    report: RunReport,
+    progress: bool = True,
+    on_finish: Callable[[str], None] | None = None,
+) -> None:
+    """
+    Run ``work(*job)`` for every job in a :func:`worker_pool`, recording each run in ``report`` as it ends; a
+    failed run does not take the others down.
+
+    :param work: a module-level function (it is sent to spawned processes) returning the run id and its seconds
+    :param jobs: the arguments of each call, the run's spec first
+    :param out: output folder (where the running runs' progress is read)
+    :param n_workers: number of processes
+    :param report: where the finished and failed runs are recorded
+    :param progress: show a progress bar
+    :param on_finish: called with each run id as it finishes
+    """
+    with RunBars(out, len(jobs), enabled=progress) as bars:
+        if not jobs:
+            return
+        executor = worker_pool(n_workers)
+        try:
+            pending = {executor.submit(work, *job): job[0] for job in jobs}
+            while pending:
+                done, _ = wait(pending, timeout=2.0 if progress else None, return_when=FIRST_COMPLETED)
+                bars.show_running(pending.values())
+                for future in done:
+                    spec = pending.pop(future)
+                    try:
+                        _, seconds = future.result()
+                        report.finished.append(spec.run_id)
+                        bars.finished(spec.run_id, f"{spec.run_id} done in {seconds:.0f} s")
+                        if on_finish is not None:
+                            on_finish(spec.run_id)
+                    except Exception as error:  # a failed run must not take the others down
+                        report.failed[spec.run_id] = f"{type(error).__name__}: {error}"
+                        bars.finished(spec.run_id, f"{spec.run_id} FAILED")
+        except KeyboardInterrupt:
+            executor.shutdown(wait=False, cancel_futures=True)
+            raise
+        executor.shutdown()
+
+
+class RunBars:
+    """
+    The progress display of :func:`run_in_pool`: one bar for the runs, and one per run in progress (episodes done,
+    elapsed time and ETA, read from the run's :class:`sb3_dtdpg.experiments.run_callbacks.RunProgress` file).
+    """
+
+    def __init__(self, out: str | Path, n_runs: int, enabled: bool = True) -> None:
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self.out, self.enabled = out, enabled
+        self.progress = Progress(
+            TextColumn("{task.fields[name]}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[unit]}"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            disable=not enabled,
+            refresh_per_second=1,  # the bars move by episodes; a faster refresh costs the parent a tenth of a core
+        )
+        self.runs = self.progress.add_task("", total=n_runs, name="[bold]runs", unit="")
+        self.running: dict[str, Any] = {}
+
+    def __enter__(self) -> RunBars:
+        self.progress.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.progress.stop()
+
+    def show_running(self, specs: Iterable[RunSpec]) -> None:
+        """Update (or add) the bar of each started run of ``specs``."""
+        if not self.enabled:
+            return
+        for spec in specs:
+            record = read_progress(self.out, spec)
+            if record is None:
+                continue
+            if spec.run_id not in self.running:
+                self.running[spec.run_id] = self.progress.add_task(
+                    "", total=record["total"], name=spec.run_id, unit=record["unit"]
+                )
+            self.progress.update(self.running[spec.run_id], completed=record["done"])
+
+    def finished(self, run_id: str, message: str) -> None:
+        """Remove the run's bar, count it as done and print ``message`` above the bars."""
+        if run_id in self.running:
+            self.progress.remove_task(self.running.pop(run_id))
+        self.progress.update(self.runs, advance=1)
+        if self.enabled:
+            self.progress.console.print(message)
