@@ -477,7 +477,7 @@ def _replace(budget: Any, **changes: Any) -> Any:
 
 # ---------------------------------------------------------------------------------------------- argument types
 def _budget(value: str) -> str:
-    from sb3_dtdpg.experiments.runs import BUDGETS
+    from sb3_dtdpg.experiments.budgets import BUDGETS
 
     if value not in BUDGETS:
         raise argparse.ArgumentTypeError(f"budget must be one of {', '.join(_PUBLIC_BUDGETS)}, got {value!r}")
@@ -589,7 +589,7 @@ class _HelpFormatter(argparse.HelpFormatter):
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help
         if text and "%(budgets)s" in text:
-            from sb3_dtdpg.experiments.runs import BUDGETS
+            from sb3_dtdpg.experiments.budgets import BUDGETS
 
             budgets = "; ".join(
                 f"{name}: {BUDGETS[name].episodes} episodes on {BUDGETS[name].scenario or 'mall'}, "
