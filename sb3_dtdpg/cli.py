@@ -35,7 +35,6 @@ from typing import Any
 
 __all__ = ["build_parser", "main"]
 
-_PUBLIC_BUDGETS = ("tiny", "default", "small", "reduced", "paper")
 # The choices of the options, spelled here so that --help needs no heavy import (tests/test_cli_errors.py checks
 # them against sb3_dtdpg.baselines and noma_radiomap.registration).
 _ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
@@ -298,7 +297,6 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     if not is_mission_env(args.env):
         args.error(f"--env: compare runs on the NomaRadioMap envs, got {args.env}")
     args.hyperparams = _hyperparams(args, args.algos)
-    _no_overrides(args)
     with _user_errors(args):
         for algo in args.algos:
             check_hyperparams(algo, args.hyperparams)
@@ -333,15 +331,6 @@ def _run_compare(args: argparse.Namespace) -> None:
     )
 
 
-def _no_overrides(args: argparse.Namespace) -> None:
-    """compare and reproduce take a preset only: their run identities have no per-value overrides."""
-    if args.overrides:
-        args.error(
-            f"--hyperparams {' '.join(args.overrides)}: {args.command} takes a --preset; single overrides go to "
-            "sb3-dtdpg train (or python -m sb3_dtdpg.train -params key:value)"
-        )
-
-
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     from sb3_dtdpg.baselines import check_hyperparams
@@ -350,7 +339,6 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
     budget = BUDGETS[args.budget]
     args.hyperparams = _hyperparams(args, ("dtdpg", "ddpg"))
-    _no_overrides(args)
     with _user_errors(args):
         check_hyperparams("dtdpg", args.hyperparams)
         if not args.report_only:
@@ -477,10 +465,13 @@ def _replace(budget: Any, **changes: Any) -> Any:
 
 # ---------------------------------------------------------------------------------------------- argument types
 def _budget(value: str) -> str:
-    from sb3_dtdpg.experiments.budgets import BUDGETS
+    from sb3_dtdpg.experiments.budgets import BUDGET_ALIASES, BUDGETS, PUBLIC_BUDGETS
 
     if value not in BUDGETS:
-        raise argparse.ArgumentTypeError(f"budget must be one of {', '.join(_PUBLIC_BUDGETS)}, got {value!r}")
+        raise argparse.ArgumentTypeError(f"budget must be one of {', '.join(PUBLIC_BUDGETS)}, got {value!r}")
+    if value in BUDGET_ALIASES:
+        print(f"sb3-dtdpg: warning: --budget {value} is deprecated, use --budget {BUDGET_ALIASES[value]}", file=sys.stderr)
+        value = BUDGET_ALIASES[value]
     return value
 
 
@@ -589,19 +580,20 @@ class _HelpFormatter(argparse.HelpFormatter):
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help
         if text and "%(budgets)s" in text:
-            from sb3_dtdpg.experiments.budgets import BUDGETS
+            from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS
 
             budgets = "; ".join(
                 f"{name}: {BUDGETS[name].episodes} episodes on {BUDGETS[name].scenario or 'mall'}, "
                 f"{BUDGETS[name].seeds} seed{'s' if BUDGETS[name].seeds != 1 else ''}"
-                for name in _PUBLIC_BUDGETS
+                + (" (the paper's scale, about an hour on 2 cores: --budget paper)" if name == "paper" else "")
+                for name in PUBLIC_BUDGETS
             )
             text = text.replace("%(budgets)s", budgets)
         return text
 
 
 def _budget_help(default: str) -> str:
-    return f"experiment scale (default: {default}). %(budgets)s; paper is the paper's scale"
+    return f"experiment scale (default: {default}). %(budgets)s"
 
 
 def _add_seeds(p: argparse.ArgumentParser) -> None:
@@ -619,7 +611,15 @@ def _add_hyperparameter_options(p: argparse.ArgumentParser) -> None:
 
 
 def _add_common_run_options(p: argparse.ArgumentParser) -> None:
-    _add_hyperparameter_options(p)
+    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP)
+    p.add_argument(  # compare and reproduce take whole presets: their run identities name the preset
+        "--hyperparams",
+        choices=_PRESETS,
+        dest="preset",
+        action=_DeprecatedOption,
+        replacement="--preset",
+        help=argparse.SUPPRESS,
+    )
     p.add_argument("--observation", choices=_OBSERVATIONS, default="goal", help=_OBSERVATION_HELP + " (default: goal)")
     p.add_argument("--workers", type=_positive, default=None, help="parallel processes (default: number of CPUs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars; a line per finished run instead")
@@ -763,8 +763,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--budget",
         type=_budget,
         default="tiny",
-        help=_budget_help("tiny, the whole pipeline in minutes")
-        + " (the paper's scale, about an hour on 2 cores: sb3-dtdpg reproduce --budget paper)",
+        help=_budget_help("tiny, the whole pipeline in minutes, too short to learn; smoke shows learning"),
     )
     _add_seeds(p)
     p.add_argument("--out", default="results/reproduce", help="output folder (default: results/reproduce)")

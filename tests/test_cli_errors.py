@@ -105,9 +105,19 @@ def test_presets_have_their_own_flag_and_the_old_spelling_warns(capsys):
     args = parser.parse_args(["train", "--algo", "dtdpg", "--hyperparams", "batch_size:256", "gamma:0.9"])
     cli._split_hyperparams(args)
     assert args.preset is None and args.overrides == {"batch_size": 256, "gamma": 0.9}
-    args = parser.parse_args(["compare", "--hyperparams", "tuned"])
+    args = parser.parse_args(["train", "--algo", "dtdpg", "--hyperparams", "tuned"])
     cli._split_hyperparams(args)
     assert args.preset == "tuned" and "--hyperparams tuned is deprecated, use --preset tuned" in capsys.readouterr().err
+    args = parser.parse_args(["compare", "--hyperparams", "paper"])  # compare and reproduce take whole presets
+    assert args.preset == "paper" and "--hyperparams is deprecated, use --preset" in capsys.readouterr().err
+
+
+def test_old_budget_names_are_aliases_of_names_that_say_what_they_run(capsys):
+    from sb3_dtdpg.experiments.budgets import BUDGETS
+
+    assert cli.build_parser().parse_args(["compare", "--budget", "reduced"]).budget == "small-200"
+    assert "--budget reduced is deprecated, use --budget small-200" in capsys.readouterr().err
+    assert BUDGETS["small-200"].scenario == "small" and BUDGETS["mall-200"].scenario is None  # None: mall
 
 
 def test_overrides_reach_the_model(tmp_path, capsys):

@@ -92,6 +92,12 @@ def evaluate_planners(
     return rows, trajectories
 
 
+def _finished_line(out: Path) -> Any:
+    from sb3_dtdpg.experiments.reproduce import finished_line  # reproduce imports this module: import late
+
+    return finished_line(out)
+
+
 def run_compare(
     out: str | Path = "results/compare",
     budget: str | Budget = "default",
@@ -149,7 +155,9 @@ def run_compare(
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams, observation)
-        report = run_many(specs, out, n_workers=n_workers, progress=progress)
+        report = run_many(
+            specs, out, n_workers=n_workers, progress=progress, on_finish=None if progress else _finished_line(out)
+        )
         for run_id, error in report.failed.items():
             print(f"run {run_id} failed: {error}")
 
@@ -206,10 +214,9 @@ def run_compare(
             title="Test episode 0 (same mission and fading for every policy)",
             destinations=goals,
         )
-        if progress:
-            print(
-                f"wrote {out}/results.md, results.csv, results_runs.csv, learning_curves.png, trajectories.png; "
-                f"TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for {len(report.finished)} runs, "
-                f"{len(report.skipped)} already done)"
-            )
+        print(  # also without progress bars: where the results went
+            f"wrote {out}/results.md, results.csv, results_runs.csv, learning_curves.png, trajectories.png, "
+            f"statistics_*.png; TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for "
+            f"{len(report.finished)} runs, {len(report.skipped)} already done)"
+        )
         return summary

@@ -18,7 +18,7 @@ DDPG vs DT-DPG. A run whose result file exists is not re-run, so the job can be 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -187,6 +187,15 @@ def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[s
     return dip
 
 
+def finished_line(out: Path) -> Callable[[str], None]:
+    """The ``on_finish`` of :func:`~sb3_dtdpg.experiments.runs.run_many` without progress bars: a line per finished run."""
+
+    def report(run_id: str) -> None:
+        print(f"finished {run_id}: {Path(out) / 'runs' / run_id / 'result.json'}", flush=True)
+
+    return report
+
+
 def _check_arguments(seeds: int, observation: str, experiments: Sequence[str] | None) -> None:
     from noma_radiomap.registration import check_observation
 
@@ -244,7 +253,13 @@ def run_reproduce(
         unique.sort(key=lambda spec: spec.seed)
         if train:
             wanted = {s.run_id for name in (chosen or EXPERIMENTS) for s in experiments[name]}
-            report = run_many([s for s in unique if s.run_id in wanted], out, n_workers=n_workers, progress=progress)
+            report = run_many(
+                [s for s in unique if s.run_id in wanted],
+                out,
+                n_workers=n_workers,
+                progress=progress,
+                on_finish=None if progress else finished_line(out),
+            )
             for run_id, error in report.failed.items():
                 print(f"run {run_id} failed: {error}")
         results = {spec.run_id: load_result(out, spec) for spec in unique}
