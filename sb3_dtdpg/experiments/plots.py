@@ -272,6 +272,7 @@ def plot_trajectories(
     n_robots = 0
     for ax, (panel, trajectories) in zip(axes, panels.items(), strict=False):
         radio_map.plot(ax=ax, kind="sinr", colorbar=True, legend=False)
+        _mission_regions(ax, scenario)
         goals = None if destinations is None else destinations.get(panel)
         if goals is not None:
             ax.plot(*np.asarray(goals, dtype=float).T, marker="X", ms=11, color="white", mec="black", ls="none")
@@ -308,11 +309,27 @@ def plot_trajectories(
                 label=f"destination (reached within {scenario.robot.arrival_radius:g} m)",
             )
         )
+    keys += [
+        Line2D([], [], ls="--", lw=1.2, color="0.4", label="start region (scenario; white on the map)"),
+        Line2D([], [], ls="none", marker="x", ms=6, color="0.4", label="candidate destinations (scenario; white)"),
+    ]
     handles = keys + map_handles
     fig.legend(
         handles, [h.get_label() for h in keys] + map_labels, loc="outside lower center", ncol=4, fontsize=8, frameon=False
     )
     return _save(fig, path, title)
+
+
+def _mission_regions(ax: Any, scenario: Any) -> None:
+    """Each robot's start region (dashed rectangle, labelled with the robot) and candidate destinations (crosses)."""
+    from matplotlib.patches import Rectangle
+
+    for u, mission in enumerate(scenario.robots):
+        x0, y0, x1, y1 = mission.start
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", lw=1.2, ec="white", zorder=4))
+        ax.text(x0, y1, f" {u}", color="white", fontsize=7, va="bottom", zorder=4)
+        candidates = np.asarray(mission.destinations, dtype=float).reshape(-1, 2)
+        ax.plot(candidates[:, 0], candidates[:, 1], ls="none", marker="x", ms=6, color="white", zorder=4)
 
 
 def _save(fig: Any, path: str | Path, title: str | None) -> Any:
