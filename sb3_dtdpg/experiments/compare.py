@@ -187,7 +187,9 @@ def run_compare(
                 )
         if groups:
             plots.plot_learning_curves(
-                groups, out / "learning_curves.png", title="Learning curves (mean and 95 % CI over seeds)"
+                groups,
+                out / "learning_curves.png",
+                title=f"Learning curves on {budget.scenario or 'mall'}, {budget.name} budget (mean and 95 % CI over seeds)",
             )
         panels: dict[str, dict[str, Any]] = {}
         goals: dict[str, Any] = {}
@@ -211,7 +213,7 @@ def run_compare(
             budget.scenario or "mall",
             panels,
             out / "trajectories.png",
-            title="Test episode 0 (same mission and fading for every policy)",
+            title=f"Test episode 0 on {budget.scenario or 'mall'} (same mission and fading for every policy)",
             destinations=goals,
         )
         print(  # also without progress bars: where the results went
