@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import re
 import sys
@@ -475,36 +476,25 @@ def _budget(value: str) -> str:
     return value
 
 
-def _seed(value: str) -> int:
-    try:
-        number = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer seed, got {value!r}") from None
-    if not 0 <= number <= _MAX_SEED:
-        raise argparse.ArgumentTypeError(f"a seed must be in 0..{_MAX_SEED} (numpy's and torch's range), got {value}")
-    return number
+def _checked(convert: Any, valid: Any, expected: str) -> Any:
+    """An argparse type: ``convert(text)``, refused with ``expected ..., got ...`` unless ``valid`` holds."""
+
+    def parse(value: str) -> Any:
+        try:
+            number = convert(value)
+        except ValueError:
+            number = None
+        if number is None or not valid(number):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {value!r}")
+        return number
+
+    return parse
 
 
-def _learning_rate(value: str) -> float:
-    import math
-
-    try:
-        number = float(value)
-    except ValueError:
-        number = math.nan
-    if not (math.isfinite(number) and number > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive finite learning rate, got {value!r}")
-    return number
-
-
-def _threads(value: str) -> int:
-    try:
-        number = int(value)
-    except ValueError:
-        number = -1
-    if number < 0:
-        raise argparse.ArgumentTypeError(f"expected 0 (torch's default) or a positive number of threads, got {value!r}")
-    return number
+_seed = _checked(int, lambda n: 0 <= n <= _MAX_SEED, f"a seed in 0..{_MAX_SEED} (numpy's and torch's range)")
+_learning_rate = _checked(float, lambda x: math.isfinite(x) and x > 0, "a positive finite learning rate")
+_threads = _checked(int, lambda n: n >= 0, "0 (torch's default) or a positive number of threads")
+_positive = _checked(int, lambda n: n >= 1, "a positive integer")
 
 
 def _output_file(suffixes: tuple[str, ...]) -> Any:
@@ -516,16 +506,6 @@ def _output_file(suffixes: tuple[str, ...]) -> Any:
         return value
 
     return check
-
-
-def _positive(value: str) -> int:
-    try:
-        number = int(value)
-    except ValueError:
-        number = 0
-    if number < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value!r}")
-    return number
 
 
 def _scenario(value: str) -> str:

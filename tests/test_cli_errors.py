@@ -30,9 +30,9 @@ def assert_one_error_line(code, printed, command, message):
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
-        (["--seed", "-1"], "a seed must be in 0..4294967295"),
-        (["--seed", "99999999999999999999"], "a seed must be in 0..4294967295"),
-        (["--eval-seed", "-5"], "a seed must be in 0..4294967295"),
+        (["--seed", "-1"], "expected a seed in 0..4294967295"),
+        (["--seed", "99999999999999999999"], "expected a seed in 0..4294967295"),
+        (["--eval-seed", "-5"], "expected a seed in 0..4294967295"),
         (["--learning-rate", "nan"], "expected a positive finite learning rate, got 'nan'"),
         (["--learning-rate", "-1"], "expected a positive finite learning rate, got '-1'"),
         (["--learning-rate", "inf"], "expected a positive finite learning rate, got 'inf'"),
