@@ -120,3 +120,23 @@ def test_enjoy_records_a_viewable_gif(saved_dtdpg, tmp_path, capsys):
 def test_enjoy_refuses_another_suffix(saved_dtdpg, tmp_path, capsys):
     code, printed = run_cli(["enjoy", str(saved_dtdpg), "--record", str(tmp_path / "m.avi")], capsys)
     assert code == 2 and "expected a .gif or .mp4 file" in printed.err
+
+
+def test_settings_of_a_model_without_a_record_come_from_its_run_or_its_observation_length(tmp_path):
+    from sb3_dtdpg.model_files import read_saved_model
+
+    run = tmp_path / "runs" / "ddpg_oma_s0_goal"
+    run.mkdir(parents=True)
+    DDPG("MlpPolicy", small_env(observation="goal", multiple_access="oma"), learning_starts=10).save(run / "model.zip")
+    spec = {"algo": "ddpg", "scenario": "small", "observation": "goal", "multiple_access": "oma", "env_id": "NomaRadioMap-v0"}
+    (run / "result.json").write_text(json.dumps({"spec": spec}))
+    saved = read_saved_model(run)  # a run folder: its model.zip and result.json
+    assert saved.algo == "ddpg" and saved.source.endswith("result.json")
+    assert (saved.settings["multiple_access"], saved.settings["observation"]) == ("oma", "goal")
+    with pytest.raises(EnvSettingsMismatch, match="multiple_access='oma'"):
+        saved.load(small_env(observation="goal"))
+
+    bare = tmp_path / "bare.zip"
+    DDPG("MlpPolicy", gym.make("NomaRadioMap-v0", observation="paper"), learning_starts=10).save(bare)
+    saved = read_saved_model(bare, algo="ddpg")
+    assert saved.settings == {"observation": "paper"} and saved.source == "the observation length"  # 6 x 2 robots
