@@ -160,6 +160,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from sb3_dtdpg.overrides import check_constructor_kwargs
 
     args.hyperparams = _hyperparams(args, [args.algo])
+    args.tb = args.tb or str(Path(args.out) / "tb")  # a run's logs live with its results, under its lock
     with _user_errors(args):
         check_hyperparams(args.algo, args.hyperparams)
         check_constructor_kwargs(algorithm_class(args.algo), args.overrides, " (--hyperparams)")
@@ -688,7 +689,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help=_OBSERVATION_HELP + " (default: goal on the NomaRadioMap envs)",
     )
-    p.add_argument("--tb", default="runs", help="TensorBoard log folder (default: runs)")
+    p.add_argument("--tb", default=None, help="TensorBoard log folder (default: <out>/tb)")
     p.add_argument(
         "--out",
         default="results/train",

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from noma_radiomap import Scenario, load_scenario
-from noma_radiomap.scenario import MAX_GRID_CELLS, MAX_MESSAGE_CHARS, MAX_NESTING, MAX_SUBSTEPS
+from noma_radiomap.scenario import MAX_GRID_CELLS, MAX_MESSAGE_CHARS, MAX_NESTING, MAX_NODES, MAX_SUBSTEPS
 
 
 @pytest.fixture(scope="module")
@@ -55,6 +55,9 @@ HOSTILE = {
     "huge t_total": (_with(mission__t_total=1e300), r"mission\.t_total: 1e\+300 is outside"),
     "billion steps": (_with(mission__max_steps=10**9), r"mission\.max_steps: 1000000000 is outside"),
     "day-long step": (_with(mission__time_step=86_400.0), r"mission\.time_step: 86400\.0 is outside"),
+    "overflowing time cost": (_with(mission__time_cost=1e39), r"mission\.time_cost: 1e\+39 is outside the physical range"),
+    "huge arrival reward": (_with(mission__arrival_reward=-1e7), r"mission\.arrival_reward: -10000000\.0 is outside"),
+    "huge success reward": (_with(mission__success_reward=1e30), r"mission\.success_reward: 1e\+30 is outside"),
     "antenna 100 m high": (_with(robot__antenna_height=100.0), r"robot\.antenna_height: 100\.0 is outside"),
     "AP 100 m high": (_with(ap__position=[3.0, 4.0, 100.0]), r"ap\.position\[2\]: 100\.0 is outside"),
     "body taller than antenna": (_with(robot__body_height=2.0), r"robot\.body_height: 2\.0 must be below robot\.antenna"),
@@ -135,7 +138,8 @@ HOSTILE_FILES = {
     "latin-1": (b"name: caf\xe9\n", r"not a UTF-8 text file \(byte 9"),
     "utf-16": ("name: small\n".encode("utf-16"), r"not a UTF-8 text file"),
     "binary": (bytes(range(256)), r"not a UTF-8 text file"),
-    "deep lists": ("name: " + "[" * 100_000 + "]" * 100_000, rf"nesting deeper than the limit of {MAX_NESTING}"),
+    # libyaml's own limit (1000 levels) may come first: it reads ahead of the composer's
+    "deep lists": ("name: " + "[" * 100_000 + "]" * 100_000, rf"nesting deeper than the limit of {MAX_NESTING}|nesting depth"),
     "deep mappings": ("".join(" " * k + f"k{k}:\n" for k in range(200)) + " " * 200 + "x: 1\n", r"nesting deeper"),
     "huge file": ("# " + "x" * 5_000_000 + "\n", r"bytes, more than the limit"),
     "malformed": ("name: [\n", r"line \d+, column \d+: malformed YAML"),
@@ -159,17 +163,91 @@ def test_hostile_file_gives_a_value_error_naming_the_file(tmp_path, case):
 
 
 def test_alias_bomb_in_a_name_is_reported_at_once(tmp_path, small_yaml):
-    # 9**9 strings once expanded: printing the value in full would never end
+    # 9**9 strings once expanded: refused while the file is composed, before anything is built or printed
     bomb = "name: [&a [x, x, x, x, x, x, x, x, x], " + ", ".join(
         f"&{chr(98 + k)} [{', '.join(['*' + chr(97 + k)] * 9)}]" for k in range(8)
     )
     path = _write(tmp_path, small_yaml.replace("name: small", bomb + "]", 1))
     start = time.process_time()
-    with pytest.raises(ValueError, match=rf"{path}: name: expected a non-empty string, got \[\[") as error:
+    with pytest.raises(ValueError, match=rf"{path}, line 1, column .*: more than the limit of {MAX_NODES:,} values") as e:
         load_scenario(path)
-    assert time.process_time() - start < 2.0 and len(str(error.value)) < 1000
+    assert time.process_time() - start < 1.0 and len(str(e.value)) < 1000
+
+
+def _alias_bomb(small_dict, part):
+    """The two files of the report: 1000 obstacles aliasing one 10 000-box list; 10 000 robots aliasing 10 000
+    destinations. Each list is within MAX_LIST_ITEMS; the expanded total is 7e7 and 3e8 values."""
+    rest = {key: value for key, value in small_dict.items() if key not in ("obstacles", "robots")}
+    text = yaml.safe_dump(rest, sort_keys=False)
+    if part == "obstacles":
+        boxes = ", ".join(["[0.1, 0.1, 0.2, 0.2, 0, 1]"] * 10_000)
+        text += f"obstacles:\n- name: o0\n  boxes: &b [{boxes}]\n"
+        text += "".join(f"- name: o{k}\n  boxes: *b\n" for k in range(1, 1000))
+        return text + yaml.safe_dump({"robots": small_dict["robots"]})
+    start = small_dict["robots"][0]["start"]
+    text += f"robots:\n- start: &s {start}\n  destinations: &d [{', '.join(['[1, 1]'] * 10_000)}]\n"
+    return text + "- start: *s\n  destinations: *d\n" * 9_999
+
+
+@pytest.mark.parametrize(("part", "kilobytes"), [("obstacles", 280), ("robots", 200)])
+def test_aliases_that_multiply_lists_are_refused_fast(tmp_path, small_dict, part, kilobytes):
+    path = _write(tmp_path, _alias_bomb(small_dict, part))
+    assert path.stat().st_size > kilobytes * 1000  # the size of the report's files
+    start = time.process_time()
+    with pytest.raises(ValueError, match=rf"^{path}, line \d+, column \d+: more than the limit of {MAX_NODES:,} values"):
+        load_scenario(path)
+    assert time.process_time() - start < 1.0
+
+
+def test_a_recursive_alias_is_refused(tmp_path, small_yaml):
+    path = _write(tmp_path, small_yaml.replace("name: small", "name: &n [1, *n]", 1))
+    with pytest.raises(ValueError, match=rf"{path}, line 1, column \d+: malformed YAML: recursive alias"):
+        load_scenario(path)
 
 
 def test_unreadable_path_is_a_value_error(tmp_path):
     with pytest.raises(ValueError, match="unknown built-in name and no such file"):
         load_scenario(tmp_path / "missing.yaml")
+
+
+def _big_room(small_dict, n_interferers):
+    """The report's room: 1000 x 1000 m at 0.5 m (4e6 cells, within MAX_GRID_CELLS), with interferers."""
+    data = copy.deepcopy(small_dict)
+    data["room"].update(width=1000.0, depth=1000.0, resolution=0.5)
+    data["interferers"] = [{"name": f"i{k}", "position": [1.0 + k, 1.0, 2.0], "power_dbm": 10.0} for k in range(n_interferers)]
+    return data
+
+
+def test_a_scenario_too_big_for_memory_is_refused_before_anything_is_allocated(small_dict):
+    import tracemalloc
+
+    data = _big_room(small_dict, 50)
+    tracemalloc.start()
+    start = time.process_time()
+    try:
+        with pytest.raises(
+            ValueError, match=r"4,000,000 cells x 51 transmitters .* need about 14\.\d+ GiB .* cap of 1\.00 GiB"
+        ):
+            Scenario.from_dict(data)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert time.process_time() - start < 1.0 and peak < 50 * 2**20  # nothing of the grid's size was built
+
+
+def test_the_memory_cap_is_documented_and_overridable(small_dict, monkeypatch):
+    from noma_radiomap import RadioMap, radiomap
+
+    assert radiomap.MAX_MEMORY_BYTES == 2**30
+    estimate = radiomap.estimated_memory(Scenario.from_dict(_big_room(small_dict, 1)))  # 1 interferer: under the cap
+    assert estimate["cells"] == 4_000_000 and estimate["transmitters"] == 2
+    assert estimate["total"] == estimate["maps"] + estimate["tables"] + estimate["occlusion"] < 2**30
+    small = load_scenario("small")
+    monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", "2e10")
+    assert Scenario.from_dict(_big_room(small_dict, 50)).room.shape == (2000, 2000)  # allowed by the user
+    monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", "1000")  # the radio map checks again
+    with pytest.raises(ValueError, match=r"384 cells x 2 transmitters .* more than the cap"):
+        RadioMap(small)
+    monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", "lots")
+    with pytest.raises(ValueError, match=r"NOMA_RADIOMAP_MAX_MEMORY_BYTES: expected a positive number of bytes, got 'lots'"):
+        RadioMap(small)

@@ -9,6 +9,7 @@ the paper trains on (its Eq. (Radio.map)).
 from __future__ import annotations
 
 import functools
+import os
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -31,6 +32,82 @@ from noma_radiomap.scenario import Scenario
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+
+
+#: Largest estimated memory of a scenario's radio map and the env's tables (:func:`estimated_memory`), in bytes;
+#: a scenario that needs more is refused when it is loaded, before anything is allocated. Override it by
+#: setting this attribute, or the environment variable ``NOMA_RADIOMAP_MAX_MEMORY_BYTES``.
+MAX_MEMORY_BYTES = 2**30
+_MEMORY_VARIABLE = "NOMA_RADIOMAP_MAX_MEMORY_BYTES"
+#: float64 arrays of one value per cell that a radio map holds or builds (the layout heights, the cell centres
+#: and the receivers' 3-D positions, the power, SINR and interference maps), per transmitter (obstacle counts,
+#: path loss, gains in dB, linear path gain and expected gain, the distances) and, in the env, per transmitter
+#: twice (its gain table and that table's transposed copy), plus one per interferer (their stacked gains).
+_PER_CELL, _PER_CELL_TRANSMITTER, _PER_CELL_TABLE = 10, 6, 2
+
+
+def estimated_memory(scenario: Scenario) -> dict[str, int]:
+    """
+    The memory a scenario's radio map and the env's gain tables take, estimated from its size alone (nothing is
+    allocated): ``cells x transmitters x 8 bytes x`` the number of arrays of each kind, plus the buffers of the
+    chunked occlusion test (:data:`noma_radiomap.geometry.CHUNK_PAIRS`).
+
+    :param scenario: the scenario
+    :return: ``cells``, ``transmitters``, ``boxes`` and the estimate in bytes: ``maps``, ``tables``,
+        ``occlusion`` and their ``total``
+    """
+    cells = scenario.room.nx * scenario.room.ny
+    transmitters = 1 + len(scenario.interferers)
+    boxes = sum(len(obstacle.boxes) for obstacle in scenario.obstacles)
+    maps = 8 * cells * (_PER_CELL + _PER_CELL_TRANSMITTER * transmitters + (transmitters - 1))
+    tables = 8 * cells * _PER_CELL_TABLE * transmitters
+    rows = min(cells, max(1, geometry.CHUNK_PAIRS // max(boxes, 1)))
+    occlusion = 8 * 8 * rows * boxes  # ~8 float64 arrays per segment-box pair of a chunk
+    total = maps + tables + occlusion
+    return {
+        "cells": cells,
+        "transmitters": transmitters,
+        "boxes": boxes,
+        "maps": maps,
+        "tables": tables,
+        "occlusion": occlusion,
+        "total": total,
+    }
+
+
+def memory_cap() -> int:
+    """:return: the cap in bytes, :data:`MAX_MEMORY_BYTES` or ``NOMA_RADIOMAP_MAX_MEMORY_BYTES`` when set"""
+    text = os.environ.get(_MEMORY_VARIABLE)
+    if text is None:
+        return int(MAX_MEMORY_BYTES)
+    try:
+        value = int(float(text))
+    except ValueError:
+        value = -1
+    if value <= 0:
+        raise ValueError(f"{_MEMORY_VARIABLE}: expected a positive number of bytes, got {text[:40]!r}")
+    return value
+
+
+def check_memory(scenario: Scenario) -> None:
+    """
+    :param scenario: the scenario
+    :raises ValueError: its :func:`estimated_memory` exceeds :func:`memory_cap`, naming the numbers
+    """
+    estimate, cap = estimated_memory(scenario), memory_cap()
+    if estimate["total"] > cap:
+        raise ValueError(
+            f"room.resolution, interferers: {estimate['cells']:,} cells x {estimate['transmitters']} transmitters "
+            f"(the AP and {estimate['transmitters'] - 1} interferers) need about {_size(estimate['total'])} for the "
+            f"radio map and the env's tables ({_size(estimate['maps'])} of maps, {_size(estimate['tables'])} of gain "
+            f"tables, {_size(estimate['occlusion'])} of occlusion buffers), more than the cap of {_size(cap)}; use a "
+            f"coarser room.resolution or fewer interferers, or raise the cap ({_MEMORY_VARIABLE} or "
+            "noma_radiomap.radiomap.MAX_MEMORY_BYTES)"
+        )
+
+
+def _size(n_bytes: int) -> str:
+    return f"{n_bytes / 2**30:.2f} GiB" if n_bytes >= 2**30 else f"{n_bytes / 2**20:.1f} MiB"
 
 
 class RadioMap:
@@ -58,9 +135,11 @@ class RadioMap:
       this replaces the paper's Eq. (19)).
 
     :param scenario: the scenario
+    :raises ValueError: the scenario would need more memory than :data:`MAX_MEMORY_BYTES` (:func:`check_memory`)
     """
 
     def __init__(self, scenario: Scenario) -> None:
+        check_memory(scenario)  # before anything is allocated
         self.scenario = scenario
         room = scenario.room
         self.resolution = room.resolution

@@ -10,10 +10,12 @@ raises a ``ValueError`` naming its path (e.g. ``obstacles[3].boxes[1]``) and the
 key is reported with the closest known one (``unknown key 'wal_loss_db' (did you mean 'wall_loss_db'?)``).
 
 YAML files are read with YAML 1.2 number rules (``15e3`` and ``1.0e9`` are numbers, not strings), duplicate
-keys are errors, and a file that is not UTF-8, nests deeper than :data:`MAX_NESTING` or is larger than
-:data:`MAX_FILE_BYTES` gives a ``ValueError`` naming the file. Limits checked at load time, before anything
+keys are errors, and a file that is not UTF-8, nests deeper than :data:`MAX_NESTING`, is larger than
+:data:`MAX_FILE_BYTES` or holds more than :data:`MAX_NODES` values once its aliases are expanded (an alias
+bomb) gives a ``ValueError`` naming the file. Limits checked at load time, before anything
 is built: at most :data:`MAX_GRID_CELLS` grid cells, :data:`MAX_SUBSTEPS` motion sub-steps per env step
-(``V_max time_step`` over half a cell), :data:`MAX_LIST_ITEMS` entries in any list, and physical ranges
+(``V_max time_step`` over half a cell), :data:`MAX_LIST_ITEMS` entries in any list, the estimated memory of
+the radio map and the env's tables (:data:`noma_radiomap.radiomap.MAX_MEMORY_BYTES`), and physical ranges
 (:data:`RANGES`) for every radio, power, height and mission constant. Error messages quote values through
 a bounded ``repr`` (at most :data:`MAX_MESSAGE_CHARS` characters), so a YAML alias bomb cannot hang them.
 """
@@ -49,6 +51,10 @@ MAX_GRID_CELLS = 4_000_000
 MAX_SUBSTEPS = 256
 #: Most entries in any list of a scenario (robots, destinations, obstacles, boxes, interferers).
 MAX_LIST_ITEMS = 10_000
+#: Most values (scalars, lists and mappings) in a scenario file once its YAML aliases are expanded: what bounds
+#: the work and memory of loading a small file whose aliases multiply lists (each list alone is within
+#: :data:`MAX_LIST_ITEMS`). 10 000 one-box obstacles take about 130 000.
+MAX_NODES = 1_000_000
 #: Deepest nesting of mappings and lists in a scenario file (the schema needs 4).
 MAX_NESTING = 32
 #: Largest scenario file read.
@@ -80,6 +86,10 @@ RANGES: dict[str, tuple[float, float]] = {
     "mission.outage_penalty": (0.0, 1e6),
     "mission.max_steps": (1, 10_000_000),
     "mission.time_step": (0.0, 3_600.0),
+    # Rewards: an episode's return (at most max_steps x robots of them) stays far inside the float32 replay buffer
+    "mission.time_cost": (-1e6, 1e6),
+    "mission.arrival_reward": (-1e6, 1e6),
+    "mission.success_reward": (-1e6, 1e6),
 }
 
 
@@ -514,7 +524,7 @@ def _parse_mission(data: Any) -> Mission:
         time_step=_number(d["time_step"], "mission.time_step", positive=True),
         **{name: _number(d.get(name, defaults[name]), f"mission.{name}") for name in reward_keys},
     )
-    for name in ("t_total", "outage_penalty", "max_steps", "time_step"):
+    for name in ("t_total", "outage_penalty", "max_steps", "time_step", *reward_keys):
         _check_range(getattr(mission, name), f"mission.{name}")
     return mission
 
@@ -661,6 +671,9 @@ def _parse_scenario(data: Any, source: str | None) -> Scenario:
         source=source,
     )
     _check_robot(scenario.robot, room, scenario.mission)
+    from noma_radiomap.radiomap import check_memory  # the radio map's module imports this one
+
+    check_memory(scenario)  # before the layout checks build the grid
     _check_layout(scenario)
     return scenario
 
@@ -680,10 +693,28 @@ def list_scenarios() -> list[str]:
     return sorted(entry.name[: -len(".yaml")] for entry in folder.iterdir() if entry.name.endswith(".yaml"))
 
 
-class ScenarioLoader(yaml.SafeLoader):
+try:  # libyaml's event parser (about ten times faster) under PyYAML's composer, which counts the values
+    from yaml._yaml import CParser
+
+    class _SafeLoader(yaml.composer.Composer, CParser, yaml.constructor.SafeConstructor, yaml.resolver.Resolver):
+        """PyYAML's ``SafeLoader`` with libyaml's parser: its ``compose_node`` is Python, and can be overridden."""
+
+        def __init__(self, stream: str | bytes) -> None:
+            CParser.__init__(self, stream)
+            yaml.composer.Composer.__init__(self)
+            yaml.constructor.SafeConstructor.__init__(self)
+            yaml.resolver.Resolver.__init__(self)
+
+except ImportError:  # PyYAML built without libyaml
+    _SafeLoader = yaml.SafeLoader  # type: ignore[misc, assignment]
+
+
+class ScenarioLoader(_SafeLoader):
     """
     PyYAML's safe loader with YAML 1.2 floats (``15e3``, ``1.0e9``: PyYAML's YAML 1.1 rules read them as
-    strings), duplicate keys refused and nesting limited to :data:`MAX_NESTING`.
+    strings), duplicate keys refused, nesting limited to :data:`MAX_NESTING` and the number of values, aliases
+    expanded (a list used through 1000 aliases counts 1000 times), to :data:`MAX_NODES`; recursive aliases are
+    refused. The counts are made while the file is composed, before any Python object is built.
     """
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
@@ -704,14 +735,36 @@ class ScenarioLoader(yaml.SafeLoader):
 
     def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
         self._depth = getattr(self, "_depth", 0) + 1
+        sizes: dict[int, int] = self.__dict__.setdefault("_sizes", {})  # expanded size of each composed node
         try:
             if self._depth > MAX_NESTING:
                 raise yaml.composer.ComposerError(
                     None, None, f"nesting deeper than the limit of {MAX_NESTING}", self.peek_event().start_mark
                 )
-            return super().compose_node(parent, index)
+            mark = self.peek_event().start_mark
+            if self.check_event(yaml.AliasEvent):
+                node = super().compose_node(parent, index)
+                if id(node) not in sizes:  # an alias of a node that contains it
+                    raise yaml.composer.ComposerError(None, None, "recursive alias", mark)
+                self._count(sizes[id(node)], mark)
+                return node
+            before = self._count(1, mark) - 1
+            node = super().compose_node(parent, index)
+            sizes[id(node)] = self._total - before
+            return node
         finally:
             self._depth -= 1
+
+    def _count(self, n_values: int, mark: Any) -> int:
+        """Count ``n_values`` more values of the file (aliases expanded); :return: the count so far"""
+        self._total: int = getattr(self, "_total", 0) + n_values
+        if self._total > MAX_NODES:
+            raise NodeLimitError(None, None, f"more than the limit of {MAX_NODES:,} values once aliases are expanded", mark)
+        return self._total
+
+
+class NodeLimitError(yaml.composer.ComposerError):
+    """A scenario file holds more than :data:`MAX_NODES` values once its aliases are expanded."""
 
 
 # YAML 1.2 core schema floats (the 1.1 pattern of PyYAML needs a dot and a signed exponent).
@@ -742,7 +795,8 @@ def _read_yaml(content: bytes, source: str) -> Any:
         mark = getattr(error, "problem_mark", None) or getattr(error, "context_mark", None)
         where = f"{source}, line {mark.line + 1}, column {mark.column + 1}" if mark is not None else source
         problem = getattr(error, "problem", None) or str(error)
-        raise ValueError(f"{where}: malformed YAML: {problem}") from None
+        kind = "" if isinstance(error, NodeLimitError) else "malformed YAML: "
+        raise ValueError(f"{where}: {kind}{problem}") from None
     except RecursionError:
         raise ValueError(f"{source}: malformed YAML: nested too deeply") from None
 

@@ -16,9 +16,10 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_dtdpg.common.files import write_json
+from sb3_dtdpg.experiments.specs import RunDivergedError
 from sb3_dtdpg.experiments.storage import save_checkpoint
 
-__all__ = ["EpisodeCounter", "EpisodeReturnLogger", "PeriodicCheckpoint", "RunProgress"]
+__all__ = ["EpisodeCounter", "EpisodeReturnLogger", "PeriodicCheckpoint", "RunProgress", "check_finite"]
 
 
 class EpisodeCounter(BaseCallback):
@@ -119,4 +120,20 @@ class PeriodicCheckpoint(BaseCallback):
     def _on_rollout_end(self) -> None:
         if self._due:
             self._due = False
+            check_finite(self.model)  # a diverged model is no checkpoint to resume from
             save_checkpoint(self.model, self.run_dir, self.identity, self.counter.n_episodes)
+
+
+def check_finite(model: Any) -> None:
+    """
+    :param model: an SB3 model
+    :raises RunDivergedError: a parameter of its policy is NaN or infinite
+    """
+    import torch as th
+
+    for name, parameter in model.policy.named_parameters():
+        if not bool(th.isfinite(parameter).all()):
+            raise RunDivergedError(
+                f"training diverged at step {model.num_timesteps}: the policy's {name} holds non-finite values "
+                "(a learning rate or reward constants too large?)"
+            )

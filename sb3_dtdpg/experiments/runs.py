@@ -33,11 +33,18 @@ from stable_baselines3.common.callbacks import BaseCallback
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files, write_json
 from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS, Budget, check_budget, get_budget
 from sb3_dtdpg.experiments.pool import RunReport, run_in_pool, worker_pool
-from sb3_dtdpg.experiments.run_callbacks import EpisodeCounter, EpisodeReturnLogger, PeriodicCheckpoint, RunProgress
-from sb3_dtdpg.experiments.specs import RUN_FORMAT_VERSION, RunMismatchError, RunSpec, run_identity
+from sb3_dtdpg.experiments.run_callbacks import (
+    EpisodeCounter,
+    EpisodeReturnLogger,
+    PeriodicCheckpoint,
+    RunProgress,
+    check_finite,
+)
+from sb3_dtdpg.experiments.specs import RUN_FORMAT_VERSION, RunDivergedError, RunMismatchError, RunSpec, run_identity
 from sb3_dtdpg.experiments.storage import (
     OutputBusyError,
     clear_checkpoints,
+    failure_path,
     load_result,
     output_lock,
     progress_path,
@@ -46,6 +53,8 @@ from sb3_dtdpg.experiments.storage import (
     result_path,
     run_folder,
     save_checkpoint,
+    tensorboard_claim,
+    tensorboard_folder,
 )
 
 __all__ = [
@@ -57,6 +66,7 @@ __all__ = [
     "EpisodeReturnLogger",
     "OutputBusyError",
     "PeriodicCheckpoint",
+    "RunDivergedError",
     "RunMismatchError",
     "RunProgress",
     "RunReport",
@@ -99,21 +109,22 @@ def _evaluation_record(result: Any, n_trajectories: int, reward_phase: str) -> d
     }
 
 
-def _fresh_start(run_dir: Path, tb_dir: Path) -> None:
-    """Remove the leftovers of an interrupted attempt (no result file), or TensorBoard would show both."""
-    for folder in (run_dir, tb_dir):
-        shutil.rmtree(folder, ignore_errors=True)
-
-
 def _build_model(spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None, verbose: int) -> tuple[Any, Any, int]:
     """:return: the training env, the model (new, or loaded from the checkpoint) and the episodes already trained"""
     from sb3_dtdpg.baselines import algorithm_class, make_env, make_model
 
     env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
     if checkpoint is not None:
-        model = algorithm_class(spec.algo).load(checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose)
-        if (checkpoint["path"] / "replay_buffer.pkl").exists():
-            model.load_replay_buffer(checkpoint["path"] / "replay_buffer.pkl")
+        try:
+            model = algorithm_class(spec.algo).load(checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose)
+            if (checkpoint["path"] / "replay_buffer.pkl").exists():
+                model.load_replay_buffer(checkpoint["path"] / "replay_buffer.pkl")
+        except Exception as error:  # written atomically: damaged from outside
+            env.close()
+            raise ValueError(
+                f"the checkpoint in {checkpoint['path']} cannot be loaded ({type(error).__name__}: {str(error)[:200]}); "
+                f"delete {run_dir / 'checkpoint.json'} to start the run afresh"
+            ) from error
         return env, model, int(checkpoint["episodes"])
     destination_episodes = None
     if spec.algo == "dtdpg":
@@ -170,9 +181,28 @@ def _train(model: Any, callbacks: list[BaseCallback], total_timesteps: int, resu
                 reset_num_timesteps=not resumed,
                 progress_bar=progress_bar,
             )
+        check_finite(model)
     finally:
         model.logger.close()  # flush and close the CSV and TensorBoard files, also on an interruption
     return time.perf_counter() - start
+
+
+def _record_divergence(out: Path, spec: RunSpec, identity: dict[str, Any], model: Any, error: Exception) -> RunDivergedError:
+    """
+    A run whose training failed with non-finite weights has diverged: its checkpoints are removed (resuming
+    would diverge again, and they would hold the folder against other settings) and ``failed.json`` records
+    the failure. :return: the error to raise
+    """
+    try:
+        check_finite(model)
+    except RunDivergedError as diverged:
+        clear_checkpoints(run_folder(out, spec))
+        write_json(failure_path(out, spec), {"identity": identity, "error": f"{type(error).__name__}: {error}"}, indent=1)
+        return RunDivergedError(
+            f"{spec.run_id}: {diverged}; its checkpoints were removed and the failure recorded in "
+            f"{failure_path(out, spec)}: run it again with other settings (the next run starts afresh)"
+        )
+    raise error
 
 
 def _evaluations(
@@ -225,10 +255,10 @@ def run_one(
     baselines: ``combined``), the network saved before the transfer on the first phase's; the result records
     them (``reward_phases``, and ``reward_phase`` in each evaluation record).
 
-    The model trains for ``spec.episodes`` episodes (``StopTrainingOnMaxEpisodes``; or ``spec.timesteps``
-    timesteps), logging to TensorBoard in ``<tensorboard_dir>/<run_id>`` (SB3's scalars and the ``mission/*``
-    ones). DT-DPG also saves its network at the end of the destination phase (the paper's theta_X), which is
-    evaluated too ("before transfer").
+    The model trains for ``spec.episodes`` episodes (counted and stopped by the run's
+    :class:`~sb3_dtdpg.experiments.run_callbacks.EpisodeReturnLogger`; or ``spec.timesteps`` timesteps), logging
+    to TensorBoard in ``<tensorboard_dir>/<run_id>`` (SB3's scalars and the ``mission/*`` ones). DT-DPG also
+    saves its network at the end of the destination phase (the paper's theta_X), which is evaluated too ("before transfer").
 
     Without ``resume``, leftovers of an interrupted attempt are removed and the run starts afresh (so that a
     run's result depends on its seed only). With ``resume``, a finished run's result is returned as is and an
@@ -238,7 +268,9 @@ def run_one(
     :param spec: the run
     :param out: output folder
     :param n_trajectories: how many test episodes' trajectories to keep in the result
-    :param tensorboard_dir: TensorBoard root folder (None: ``<out>/tb``)
+    :param tensorboard_dir: TensorBoard root folder (None: ``<out>/tb``, under the output folder's lock); a run
+        claims its folder there (:func:`sb3_dtdpg.experiments.storage.tensorboard_claim`): it never deletes or
+        writes into another run's logs
     :param checkpoint_every: save a checkpoint every this many episodes (None: none)
     :param resume: reuse a finished result or the last checkpoint (both checked against :func:`run_identity`)
     :param threads: torch threads (None: torch's default; 1 in parallel workers)
@@ -246,11 +278,13 @@ def run_one(
     :param verbose: SB3 verbosity
     :param identity: the run's :func:`prepare_run` (None: prepared here)
     :return: the result (as written)
-    :raises RunMismatchError: with ``resume``, a stored result or checkpoint is another run's
+    :raises RunMismatchError: with ``resume``, a stored result or checkpoint is another run's; the TensorBoard
+        folder holds another run's logs
+    :raises OutputBusyError: another process trains into the run's TensorBoard folder
+    :raises RunDivergedError: training diverged (``failed.json`` records it; the checkpoints are removed)
     :raises ValueError: when the budget cannot train (:func:`prepare_run`)
     """
     import torch as th
-    from stable_baselines3.common.logger import configure
 
     import noma_radiomap  # noqa: F401  (registers the env ids in a spawned worker)
 
@@ -259,23 +293,47 @@ def run_one(
         th.set_num_threads(threads)  # one core per run: runs are parallel across processes
     out = Path(out)
     run_dir = run_folder(out, spec)
-    tb_dir = (out / "tb" if tensorboard_dir is None else Path(tensorboard_dir)) / spec.run_id
     checkpoint = None
     if resume:
         finished = load_result(out, spec, identity)
         if finished is not None:
             return finished
         checkpoint = read_checkpoint(run_dir, identity)
-    if checkpoint is None:
-        _fresh_start(run_dir, tb_dir)
-    remove_temp_files(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
+    with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):
+        if checkpoint is None:
+            shutil.rmtree(run_dir, ignore_errors=True)  # leftovers of an interrupted attempt: start afresh
+        remove_temp_files(run_dir)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        return _train_and_record(
+            spec, out, tb_dir, identity, checkpoint, n_trajectories, checkpoint_every, progress_bar, verbose
+        )
+
+
+def _train_and_record(
+    spec: RunSpec,
+    out: Path,
+    tb_dir: Path,
+    identity: dict[str, Any],
+    checkpoint: dict[str, Any] | None,
+    n_trajectories: int,
+    checkpoint_every: int | None,
+    progress_bar: bool,
+    verbose: int,
+) -> dict[str, Any]:
+    """The steps of :func:`run_one` once its folders are ready: build, train, save, evaluate, write the result."""
+    from stable_baselines3.common.logger import configure
+
+    run_dir = run_folder(out, spec)
     env, model, done_episodes = _build_model(spec, run_dir, checkpoint, verbose)
     # A logger of our own, so that the TensorBoard folder is exactly tb/<run_id> (SB3 would append "_1").
     model.set_logger(configure(str(tb_dir), ["tensorboard", "csv", *(["stdout"] if verbose else [])]))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
     counter, callbacks, total_timesteps = _callbacks(spec, out, model, max_steps, done_episodes, identity, checkpoint_every)
-    train_s = _train(model, callbacks, total_timesteps, checkpoint is not None, progress_bar)
+    try:
+        train_s = _train(model, callbacks, total_timesteps, checkpoint is not None, progress_bar)
+    except Exception as error:  # not KeyboardInterrupt: an interrupted run keeps its checkpoint
+        raise _record_divergence(out, spec, identity, model, error) from error
     atomic_write(run_dir / "model.zip", model.save)
     curriculum = getattr(model, "curriculum_state", None)
     if curriculum is not None:

@@ -16,7 +16,7 @@ from typing import Any
 
 from sb3_dtdpg.common.files import json_default
 
-__all__ = ["RUN_FORMAT_VERSION", "RunMismatchError", "RunSpec", "check_identity", "run_identity"]
+__all__ = ["RUN_FORMAT_VERSION", "RunDivergedError", "RunMismatchError", "RunSpec", "check_identity", "run_identity"]
 
 #: Version of what a run is and what its result file holds; results of another version are not reused.
 RUN_FORMAT_VERSION = 2
@@ -95,6 +95,10 @@ class RunSpec:
         if self.observation != "paper":
             kwargs["observation"] = self.observation
         return kwargs
+
+
+class RunDivergedError(ValueError):
+    """A run's training diverged (non-finite network weights): its settings cannot train, its checkpoints are removed."""
 
 
 class RunMismatchError(ValueError):

@@ -2,24 +2,29 @@
 
 Under an output folder ``<out>``, a run owns ``<out>/runs/<run_id>/``: ``result.json`` (written last,
 atomically: its existence means the run is finished), ``progress.json`` while it trains, ``checkpoint.json`` and
-``checkpoints/`` when checkpointed, and the saved models. :func:`output_lock` keeps two jobs out of one folder.
+``checkpoints/`` when checkpointed, and the saved models; its TensorBoard logs go to ``<out>/tb/<run_id>``
+(:func:`tensorboard_folder`, :func:`tensorboard_claim`). :func:`output_lock` keeps two jobs out of one folder.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import os
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.common.files import atomic_write, write_json
-from sb3_dtdpg.experiments.specs import RunSpec, check_identity, run_identity
+from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identity, run_identity
 
 __all__ = [
+    "FOLDER_LOCK",
+    "TENSORBOARD_OWNER",
     "OutputBusyError",
     "clear_checkpoints",
+    "failure_path",
     "load_result",
     "output_lock",
     "progress_path",
@@ -28,6 +33,8 @@ __all__ = [
     "result_path",
     "run_folder",
     "save_checkpoint",
+    "tensorboard_claim",
+    "tensorboard_folder",
 ]
 
 
@@ -50,6 +57,22 @@ def progress_path(out: str | Path, spec: RunSpec) -> Path:
     return run_folder(out, spec) / "progress.json"
 
 
+def _read_record(path: Path) -> dict[str, Any]:
+    """
+    :param path: a result or checkpoint record (written atomically: unreadable only when damaged from outside)
+    :return: its content
+    :raises ValueError: naming the file and the fix when it is not a JSON mapping
+    """
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        record = error
+    if not isinstance(record, dict):
+        reason = f"{type(record).__name__}: {record}" if isinstance(record, Exception) else "not a JSON mapping"
+        raise ValueError(f"{path} is unreadable ({str(reason)[:200]}); delete {path.parent} to run this run again")
+    return record
+
+
 def load_result(out: str | Path, spec: RunSpec, identity: dict[str, Any] | None = None) -> dict[str, Any] | None:
     """
     The stored result of a finished run, checked against the run's identity.
@@ -59,11 +82,12 @@ def load_result(out: str | Path, spec: RunSpec, identity: dict[str, Any] | None 
     :param identity: the run's :func:`run_identity` (None: computed here)
     :return: the result, or None when the run has not finished
     :raises RunMismatchError: the stored result is another run's (another budget, scenario, hyperparameters ...)
+    :raises ValueError: the result file is damaged
     """
     path = result_path(out, spec)
     if not path.exists():
         return None
-    result = json.loads(path.read_text())
+    result = _read_record(path)
     check_identity(result, run_identity(spec) if identity is None else identity, path)
     return result
 
@@ -76,32 +100,124 @@ def read_progress(out: str | Path, spec: RunSpec) -> dict[str, Any] | None:
         return None
 
 
+#: The lock file of a whole-folder job (``compare``, ``reproduce``); a run's lock is held with a shared hold of it.
+FOLDER_LOCK = ".lock"
+
+
 @contextlib.contextmanager
-def output_lock(out: str | Path, name: str = ".lock") -> Iterator[Path]:
+def _hold(path: Path, shared: bool) -> Iterator[bool]:
+    """Hold an OS lock on ``path`` (released when the process ends, even when killed); yield whether it was free."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        import fcntl
+    except ImportError:  # no shared locks without fcntl: every hold is exclusive
+        from filelock import FileLock, Timeout
+
+        lock = FileLock(path, timeout=0)
+        try:
+            lock.acquire()
+        except Timeout:
+            yield False
+            return
+        try:
+            yield True
+        finally:
+            lock.release()
+        return
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        yield True
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock
+
+
+@contextlib.contextmanager
+def output_lock(out: str | Path, name: str = FOLDER_LOCK) -> Iterator[Path]:
     """
-    Hold the lock of an output folder for the duration of a job (an OS file lock: released when the process
-    ends, even when killed).
+    Hold the lock of an output folder, or of one run in it, for the duration of a job (OS file locks:
+    released when the process ends, even when killed).
+
+    A whole-folder job (``compare``, ``reproduce``: ``name`` is :data:`FOLDER_LOCK`) holds the folder's lock
+    alone. A job of one run (``train``: ``name`` is the run's lock, e.g. ``.<run_id>.lock``) holds its own lock
+    and shares the folder's lock with other runs' jobs, so that runs of other ids may train into the folder at
+    the same time, but no whole-folder job while any of them does, and the other way round.
 
     :param out: the folder
     :param name: the lock file's name in it
     :raises OutputBusyError: another process holds it
     """
-    from filelock import FileLock, Timeout
-
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / name
-    lock = FileLock(path, timeout=0)
-    try:
-        lock.acquire()
-    except Timeout:
-        raise OutputBusyError(
-            f"{out} is in use by another job (lock {path}); wait for it to end, or use another output folder"
-        ) from None
-    try:
-        yield path
-    finally:
-        lock.release()
+    with contextlib.ExitStack() as stack:
+        holds = [(out / FOLDER_LOCK, name != FOLDER_LOCK)]
+        if name != FOLDER_LOCK:
+            holds.append((out / name, False))
+        for path, shared in holds:
+            if not stack.enter_context(_hold(path, shared)):
+                raise OutputBusyError(
+                    f"{out} is in use by another job (lock {path}); wait for it to end, or use another output folder"
+                )
+        yield out / name
+
+
+def tensorboard_folder(out: str | Path, spec: RunSpec, tensorboard_dir: str | Path | None = None) -> Path:
+    """:return: a run's TensorBoard folder, ``<tensorboard_dir>/<run_id>`` (default root: ``<out>/tb``)"""
+    return (Path(out) / "tb" if tensorboard_dir is None else Path(tensorboard_dir)) / spec.run_id
+
+
+#: The file in a TensorBoard folder outside the output folder that names the run owning it.
+TENSORBOARD_OWNER = ".owner.json"
+
+
+@contextlib.contextmanager
+def tensorboard_claim(tb_dir: Path, out: Path, run_id: str, fresh: bool) -> Iterator[Path]:
+    """
+    Own a run's TensorBoard folder while the run trains, so that no run deletes or writes into another's logs.
+
+    A folder inside the output folder (the default, ``<out>/tb/<run_id>``) is covered by the output folder's
+    lock (:func:`output_lock`). One elsewhere gets a lock of its own for the run's duration and a
+    :data:`TENSORBOARD_OWNER` file naming the output folder and run id; a folder that holds logs of another
+    output folder's run (or logs of unknown origin) is refused, never emptied.
+
+    :param tb_dir: the run's TensorBoard folder (:func:`tensorboard_folder`)
+    :param out: the run's output folder
+    :param run_id: the run's id
+    :param fresh: the run starts afresh: the folder's old logs (this run's) are removed
+    :raises OutputBusyError: another process trains into the folder
+    :raises RunMismatchError: the folder holds another run's logs
+    """
+    out = Path(out).resolve()
+    owner = {"out": str(out), "run_id": run_id}
+    with contextlib.ExitStack() as stack:
+        outside = not tb_dir.resolve().is_relative_to(out)
+        if outside:
+            lock = tb_dir.parent / f".{tb_dir.name}.lock"
+            if not stack.enter_context(_hold(lock, shared=False)):
+                raise OutputBusyError(
+                    f"TensorBoard folder {tb_dir} is in use by another run (lock {lock}); wait for it to end, or "
+                    "log to another folder"
+                )
+            marker = tb_dir / TENSORBOARD_OWNER
+            if tb_dir.is_dir() and any(tb_dir.iterdir()):
+                try:
+                    stored = json.loads(marker.read_text())
+                except (OSError, ValueError):
+                    stored = None
+                if stored != owner:
+                    whose = "of unknown origin" if stored is None else f"of run {stored.get('run_id')} in {stored.get('out')}"
+                    raise RunMismatchError(
+                        f"TensorBoard folder {tb_dir} holds the logs {whose}, not of run {run_id} in {out}; log to "
+                        f"another folder (the default is inside the output folder) or delete {tb_dir}"
+                    )
+        if fresh:
+            shutil.rmtree(tb_dir, ignore_errors=True)  # this run's own logs of an interrupted attempt
+        if outside:
+            write_json(tb_dir / TENSORBOARD_OWNER, owner)
+        yield tb_dir
 
 
 def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episodes: int) -> Path:
@@ -138,16 +254,22 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
     :param identity: the run's :func:`run_identity` (None: not checked)
     :return: ``checkpoint.json``'s content plus ``path`` (the folder), or None when there is none
     :raises RunMismatchError: the checkpoint is another run's
+    :raises ValueError: the checkpoint record is damaged
     """
     run_dir = Path(run_dir)
     pointer = run_dir / "checkpoint.json"
     if not pointer.exists():
         return None
-    checkpoint = json.loads(pointer.read_text())
+    checkpoint = _read_record(pointer)
     if identity is not None:
         check_identity(checkpoint, identity, pointer)
     checkpoint["path"] = run_dir / checkpoint["folder"]
     return checkpoint if (checkpoint["path"] / "model.zip").exists() else None
+
+
+def failure_path(out: str | Path, spec: RunSpec) -> Path:
+    """:return: the record of a failed run (:func:`sb3_dtdpg.experiments.runs.run_one` writes it when training diverges)"""
+    return run_folder(out, spec) / "failed.json"
 
 
 def clear_checkpoints(run_dir: Path) -> None:

@@ -1,0 +1,216 @@
+"""The run harness under attack: shared TensorBoard folders, jobs on one folder, kills, diverged runs, odd paths."""
+
+import dataclasses
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from sb3_dtdpg.cli import main
+from sb3_dtdpg.experiments.compare import run_compare
+from sb3_dtdpg.experiments.runs import (
+    OutputBusyError,
+    PeriodicCheckpoint,
+    RunDivergedError,
+    RunMismatchError,
+    RunSpec,
+    output_lock,
+    result_path,
+    run_one,
+)
+
+pytestmark = pytest.mark.filterwarnings("ignore:The inplace keyword:DeprecationWarning", "ignore::FutureWarning")
+
+SPEC = RunSpec("ddpg", "noma", 0, 3, scenario="small", eval_episodes=1, eval_before_transfer=False)
+TRAIN = ["train", "--algo", "ddpg", "--hyperparams", "paper", "--observation", "paper", "--scenario", "small"]
+TRAIN += ["--episodes", "3", "--eval-episodes", "1", "--no-progress"]
+
+
+@pytest.fixture(autouse=True)
+def _agg_backend(monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+
+
+def _events(folder):
+    return sorted(folder.rglob("events.out.tfevents*"))
+
+
+# ---------------------------------------------------------------------------------------------- TensorBoard
+def test_two_trains_with_the_same_settings_keep_both_runs_tensorboard_logs(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the default TensorBoard folder is relative
+    assert main([*TRAIN, "--out", "a"]) == 0
+    assert main([*TRAIN, "--out", "b"]) == 0
+    first, second = _events(tmp_path / "a"), _events(tmp_path / "b")
+    assert len(first) == 1 and len(second) == 1 and first[0].stat().st_size > 0  # one stream per run, both kept
+
+
+def test_a_run_never_deletes_another_runs_tensorboard_logs(tmp_path):
+    shared = tmp_path / "tb"
+    run_one(SPEC, tmp_path / "a", tensorboard_dir=shared)
+    kept = _events(shared / SPEC.run_id)
+    assert len(kept) == 1
+    with pytest.raises(RunMismatchError, match=r"holds the logs of run ddpg_noma_s0 in .*a, not of run"):
+        run_one(SPEC, tmp_path / "b", tensorboard_dir=shared)
+    assert _events(shared / SPEC.run_id) == kept and not result_path(tmp_path / "b", SPEC).exists()
+    run_one(SPEC, tmp_path / "a", tensorboard_dir=shared)  # its own run again: a fresh start replaces its logs
+    assert len(_events(shared / SPEC.run_id)) == 1
+
+
+def test_a_tensorboard_folder_in_use_is_refused(tmp_path):
+    shared = tmp_path / "tb"
+    with output_lock(shared, f".{SPEC.run_id}.lock"):  # what another run's claim holds
+        with pytest.raises(OutputBusyError, match=r"TensorBoard folder .* is in use by another run"):
+            run_one(SPEC, tmp_path / "a", tensorboard_dir=shared)
+
+
+# ---------------------------------------------------------------------------------------------- locks
+def test_compare_and_train_exclude_each_other_on_one_folder(tmp_path):
+    with output_lock(tmp_path):  # compare's (and reproduce's) lock
+        with pytest.raises(OutputBusyError, match="in use by another job"):
+            with output_lock(tmp_path, f".{SPEC.run_id}.lock"):  # train's
+                pass
+    with output_lock(tmp_path, f".{SPEC.run_id}.lock"):
+        with output_lock(tmp_path, ".other_run.lock"):  # trains of other runs share the folder
+            pass
+        with pytest.raises(OutputBusyError, match="in use by another job"):
+            with output_lock(tmp_path, f".{SPEC.run_id}.lock"):  # but not one run
+                pass
+        with pytest.raises(OutputBusyError, match="in use by another job"):
+            run_compare(tmp_path, budget="_micro", seeds=1, progress=False)
+    with output_lock(tmp_path):  # all released
+        pass
+    assert not any(tmp_path.glob("runs/*"))
+
+
+# ---------------------------------------------------------------------------------------------- diverged runs
+def test_a_diverged_run_records_its_failure_and_leaves_no_checkpoint_behind(tmp_path):
+    diverging = dataclasses.replace(SPEC, episodes=6, learning_rate=math.inf)
+    with pytest.raises(RunDivergedError, match=r"ddpg_noma_s0: training diverged at step \d+: the policy's .* non-finite"):
+        run_one(diverging, tmp_path, checkpoint_every=1, resume=True)
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    assert sorted(p.name for p in run_dir.iterdir()) == ["failed.json"]
+    failure = json.loads((run_dir / "failed.json").read_text())
+    assert failure["identity"]["spec"]["learning_rate"] == math.inf and "non-finite" in failure["error"]
+    # The folder is not held against other settings: the next run trains (before: RunMismatchError)
+    result = run_one(dataclasses.replace(SPEC, episodes=6), tmp_path, checkpoint_every=1, resume=True)
+    assert result["train"]["episodes"] == 6 and not (run_dir / "failed.json").exists()
+
+
+# ---------------------------------------------------------------------------------------------- SIGKILL
+COMPARE = "from sb3_dtdpg.experiments.compare import run_compare\n"
+COMPARE += "run_compare({out!r}, budget='_micro', seeds=1, algos=['ddpg'], n_workers=1, progress=False)\n"
+
+
+def _results(out):
+    """Each run's result without its timings (the only values that differ between two runs of one spec)."""
+    results = {}
+    for path in sorted(out.glob("runs/*/result.json")):
+        result = json.loads(path.read_text())
+        del result["train"]["wall_s"], result["train"]["steps_per_s"]
+        results[path.parent.name] = result
+    return results
+
+
+def test_sigkill_of_compare_while_training_then_a_rerun_gives_the_uninterrupted_results(tmp_path):
+    killed, reference = tmp_path / "killed", tmp_path / "reference"
+    job = subprocess.Popen([sys.executable, "-c", COMPARE.format(out=str(killed))], start_new_session=True)
+    deadline = time.monotonic() + 240
+    try:
+        while not any(killed.glob("runs/*/progress.json")):  # a run is training
+            assert job.poll() is None and time.monotonic() < deadline, "compare ended before it was killed"
+            time.sleep(0.02)
+    finally:
+        os.killpg(job.pid, signal.SIGKILL)  # the job and its workers, at once
+        job.wait()
+    assert not any(killed.glob("runs/*/result.json"))  # killed mid-training: nothing finished
+    assert any(killed.glob("tb/*/events.out.tfevents*"))  # and it had started logging
+    run_compare(killed, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
+    run_compare(reference, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
+    assert _results(killed) == _results(reference) and sorted(_results(killed)) == ["ddpg_noma_s0", "ddpg_oma_s0"]
+    for run_id in _results(killed):
+        assert len(_events(killed / "tb" / run_id)) == 1  # one event stream per run: the killed one's is gone
+    assert not list(killed.rglob("*.tmp")) and not list(killed.rglob("progress.json"))
+
+
+# ---------------------------------------------------------------------------------------------- damaged files
+@pytest.mark.parametrize("name", ["result.json", "checkpoint.json"])
+@pytest.mark.parametrize("content", ["{trunc", "[1, 2]", ""])
+def test_a_damaged_record_is_a_named_error(tmp_path, name, content):
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    run_dir.mkdir(parents=True)
+    (run_dir / name).write_text(content)
+    with pytest.raises(ValueError, match=rf"{run_dir / name} is unreadable .*; delete {run_dir} to run this run again"):
+        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    assert (run_dir / name).read_text() == content  # nothing removed behind the user's back
+
+
+def test_a_damaged_checkpoint_model_is_a_named_error(tmp_path, monkeypatch):
+    original = PeriodicCheckpoint._on_rollout_end
+
+    def interrupt_after_first_checkpoint(self):
+        due = self._due
+        original(self)
+        if due:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(PeriodicCheckpoint, "_on_rollout_end", interrupt_after_first_checkpoint)
+    with pytest.raises(KeyboardInterrupt):
+        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    monkeypatch.setattr(PeriodicCheckpoint, "_on_rollout_end", original)
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    (model := next(run_dir.glob("checkpoints/*/model.zip"))).write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match=rf"checkpoint in {model.parent} cannot be loaded .*delete .*checkpoint\.json"):
+        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    (run_dir / "checkpoint.json").unlink()  # the fix the message names
+    assert run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)["train"]["resumed_at_episode"] is None
+
+
+def test_a_full_disk_at_the_result_leaves_no_partial_file_and_a_rerun_finishes(tmp_path, monkeypatch):
+    from sb3_dtdpg.common import files
+
+    write_text = files.Path.write_text
+
+    def full_disk(self, text, *args, **kwargs):
+        if self.name.startswith(".result.json"):
+            write_text(self, text[: len(text) // 2])  # part of it written, then the disk is full
+            raise OSError(28, "No space left on device")
+        return write_text(self, text, *args, **kwargs)
+
+    monkeypatch.setattr(files.Path, "write_text", full_disk)
+    with pytest.raises(OSError, match="No space left on device"):
+        run_one(SPEC, tmp_path, resume=True)
+    monkeypatch.undo()
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    assert not (run_dir / "result.json").exists() and not list(run_dir.glob("*.tmp"))
+    assert run_one(SPEC, tmp_path, resume=True)["train"]["episodes"] == 3
+    with output_lock(tmp_path):  # the lock was never held by the run: nothing to release
+        pass
+
+
+# ---------------------------------------------------------------------------------------------- paths and HOME
+def test_paths_with_spaces_and_symlinks(tmp_path):
+    real = tmp_path / "real folder"
+    real.mkdir()
+    (tmp_path / "link to it").symlink_to(real)
+    out = tmp_path / "link to it" / "out put"
+    result = run_one(SPEC, out)
+    stored = json.loads((real / "out put" / "runs" / SPEC.run_id / "result.json").read_text())
+    assert json.dumps(stored, sort_keys=True) == json.dumps(result, sort_keys=True)  # (NaN != NaN: compare texts)
+    # A TensorBoard folder reached through a symlink into the output folder is the output folder's
+    run_one(SPEC, real / "out put", tensorboard_dir=tmp_path / "link to it" / "out put" / "tb")
+    assert not list((real / "out put" / "tb").rglob(".owner.json")) and len(_events(real / "out put" / "tb")) == 1
+
+
+def test_train_works_without_home(tmp_path):
+    env = {key: value for key, value in os.environ.items() if key != "HOME"}
+    code = "import sys\nfrom sb3_dtdpg.cli import main\nsys.exit(main(sys.argv[1:]))\n"
+    done = subprocess.run(
+        [sys.executable, "-c", code, *TRAIN, "--out", "o"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "o" / "runs" / SPEC.run_id / "result.json").exists() and len(_events(tmp_path / "o" / "tb")) == 1
