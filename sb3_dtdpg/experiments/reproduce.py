@@ -364,14 +364,14 @@ def _figures(
             out / "fig_reward_learning_rates.png",
             tags=(("episode/return", "reward per episode (phase reward)"),),
             smooth=5,
-            title=f"DT-DPG reward per episode, two learning rates ({where}; dotted: transfer)",
+            title=f"DT-DPG reward per episode, two learning rates\n({where}; dotted: transfer)",
         )
         plots.plot_learning_curves(
             groups,
             out / "fig_mqi_per_episode.png",
             tags=(("mission/mqi", "MQI per episode"),),
             smooth=5,
-            title=f"DT-DPG MQI per episode ({where}; dotted: transfer to MQI training)",
+            title=f"DT-DPG MQI per episode\n({where}; dotted: transfer to MQI training)",
         )
     if groups := dirs("ddpg_vs_dtdpg"):
         plots.plot_learning_curves(
