@@ -186,11 +186,6 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if mission:
         multiple_access, channel = env.unwrapped.multiple_access, env.unwrapped.channel
         env.close()
-        if args.overrides:
-            args.error(
-                f"--hyperparams {' '.join(args.overrides)}: on the NomaRadioMap envs train overrides learning_rate only "
-                "(a run's identity has no other overrides yet); python -m sb3_dtdpg.train -params key:value takes any"
-            )
         return _train_mission(args, multiple_access, channel)
     return _train_any_env(args, env)
 
@@ -214,6 +209,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
         hyperparams=args.hyperparams,
         timesteps=args.timesteps,
         observation=args.observation,
+        overrides=tuple((name, repr(value)) for name, value in args.overrides.items()),
     )
     out = Path(args.out)
     run_dir = out / "runs" / spec.run_id

@@ -157,3 +157,20 @@ def test_subcommand_help_lists_the_budgets_when_shown(capsys):
     code, printed = run_cli(["compare", "--help"], capsys)
     assert code == 0
     assert "tiny:" in printed.out and "episodes on small" in " ".join(printed.out.split())
+
+
+def test_overrides_reach_a_mission_run_and_name_it(tmp_path, capsys):
+    from stable_baselines3 import DDPG
+
+    from sb3_dtdpg.experiments.specs import RunSpec, run_identity
+
+    args = ["train", "--algo", "ddpg", "--preset", "paper", "--scenario", "small", "--episodes", "2"]
+    args += ["--hyperparams", "batch_size:16", "policy_kwargs:dict(net_arch=[8, 8])", "--eval-episodes", "1"]
+    args += ["--no-progress", "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]
+    assert main(args) == 0
+    (run,) = (tmp_path / "runs").iterdir()
+    assert run.name.startswith("ddpg_noma_s0_goal_hp")  # another run than the one without overrides
+    model = DDPG.load(run / "model.zip")
+    assert model.batch_size == 16 and model.policy.actor.mu[0].out_features == 8
+    # Without overrides the identity is what it was before overrides existed: earlier results stay valid
+    assert "overrides" not in run_identity(RunSpec("ddpg", "noma", 0, 2, scenario="small"))["spec"]

@@ -80,7 +80,9 @@ def check_budget(spec: RunSpec) -> None:
     from noma_radiomap import load_scenario
     from sb3_dtdpg.baselines import check_training_budget, hyperparameter
 
-    learning_starts = int(hyperparameter(spec.algo, "learning_starts", spec.hyperparams))
+    learning_starts = int(
+        spec.override_kwargs.get("learning_starts", hyperparameter(spec.algo, "learning_starts", spec.hyperparams))
+    )
     if spec.timesteps is not None:
         check_training_budget(spec.timesteps, learning_starts, f"{spec.timesteps} env steps ({spec.run_id})")
         return
