@@ -18,7 +18,8 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 import noma_radiomap  # noqa: F401  (registers the ids)
-from noma_radiomap.vector import BatchStep, NomaRadioMapVecEnv
+from noma_radiomap.core import MissionStep
+from noma_radiomap.vector import NomaRadioMapVecEnv
 
 
 class MissionVecEnv(VecEnv):
@@ -27,7 +28,8 @@ class MissionVecEnv(VecEnv):
 
     :param num_envs: number of missions N
     :param env_kwargs: the keyword arguments of :class:`~noma_radiomap.NomaRadioMapEnv` (``scenario``,
-        ``multiple_access``, ``channel``, ``reward_phase``, ``inducing``) and ``max_episode_steps``
+        ``multiple_access``, ``channel``, ``reward_phase``, ``inducing``, ``observation``, ``task``) and
+        ``max_episode_steps``
     """
 
     def __init__(self, num_envs: int = 1, **env_kwargs: Any) -> None:
@@ -67,15 +69,8 @@ class MissionVecEnv(VecEnv):
         infos = step_infos(result)
         if dones.any():
             ended = np.flatnonzero(dones)
-            summaries = vec.episode_summaries(ended)
-            for j, k in enumerate(ended):
-                infos[k].update(
-                    is_success=bool(summaries["is_success"][j]),
-                    mqi=float(summaries["mqi"][j]),
-                    mission_time=summaries["mission_time"][j],
-                    outage_steps=summaries["outage_steps"][j],
-                    terminal_observation=obs[k],
-                )
+            for k in ended:
+                infos[k]["terminal_observation"] = obs[k]
             vec.reset_missions(ended)
             obs = obs.copy()
             obs[ended] = vec.observations(ended)
@@ -107,31 +102,19 @@ class MissionVecEnv(VecEnv):
         raise NotImplementedError("the mission vector env does not render; render a single env (gymnasium.make)")
 
 
-def step_infos(result: BatchStep) -> list[dict[str, Any]]:
+def step_infos(result: MissionStep) -> list[dict[str, Any]]:
     """
-    The ``info`` of each stepped mission as a ``DummyVecEnv`` of single envs gives it (without the episode
-    summary): the single env's ``info`` and SB3's ``TimeLimit.truncated``.
+    The ``info`` of each stepped mission as a ``DummyVecEnv`` of single envs gives it: the single env's ``info``
+    (:meth:`noma_radiomap.core.MissionStep.info`) and SB3's ``TimeLimit.truncated``.
 
     :param result: the outcome of a step of the missions
     :return: one dict per stepped mission, in row order
     """
-    names = list(result.components)
-    components = zip(*(value.tolist() for value in result.components.values()), strict=True)
     time_limit = (result.truncated & ~result.terminated).tolist()
-    per_robot = (result.rate_bps, result.sinr_db, result.outage, result.power_w, result.gain_db, result.decoding_order)
-    return [
-        {
-            "reward_components": dict(zip(names, values, strict=True)),
-            "rate_bps": rate,
-            "sinr_db": sinr,
-            "outage": outage,
-            "power_w": power,
-            "gain_db": gain,
-            "decoding_order": order,
-            "TimeLimit.truncated": truncated,
-        }
-        for values, truncated, rate, sinr, outage, power, gain, order in zip(components, time_limit, *per_robot, strict=True)
-    ]
+    infos = result.infos()
+    for info, truncated in zip(infos, time_limit, strict=True):
+        info["TimeLimit.truncated"] = truncated
+    return infos
 
 
 def make_mission_vec_env(

@@ -20,7 +20,7 @@ def env():
 
 
 def snapshot(env):
-    return (env.positions.copy(), env.arrived.copy(), env.step_count, len(env._trajectory), list(env._outage_steps))
+    return (env.positions.copy(), env.arrived.copy(), env.step_count, len(env.trajectory), list(env.core.outage_steps[0]))
 
 
 def assert_same_state(a, b):
@@ -97,9 +97,9 @@ def test_any_float_action_is_refused_cleanly_or_keeps_every_invariant(env, value
     obs, reward, _, _, info = env.step(action)
     assert np.isfinite(obs).all() and (np.abs(obs) <= 1).all()
     assert math.isfinite(reward)
-    assert env._motion.is_free(env.positions).all()
+    assert env.core.motion.is_free(env.positions).all()
     assert np.isfinite(info["rate_bps"]).all() and (info["power_w"] >= 0).all()
-    assert info["power_w"].sum() <= env._max_power_w * (1 + 1e-9)
+    assert info["power_w"].sum() <= env.core.max_power_w * (1 + 1e-9)
     assert all(math.isfinite(v) for v in info["reward_components"].values())
 
 
@@ -114,7 +114,7 @@ def test_vector_env_refuses_a_non_finite_action_of_any_mission_and_changes_nothi
 
     env = NomaRadioMapVecEnv(3, scenario="small")
     env.reset(seed=0)
-    before = (env.positions.copy(), env.arrived.copy(), env.step_counts.copy(), env._outage_steps.copy())
+    before = (env.positions.copy(), env.arrived.copy(), env.step_counts.copy(), env.core.outage_steps.copy())
     actions = np.zeros((3, 3 * N_ROBOTS))
     actions[2, 5] = bad
     with pytest.raises(ValueError, match=r"actions\[2, 5\] \(mission 2, robot 1, power\): expected a finite number"):
@@ -123,7 +123,7 @@ def test_vector_env_refuses_a_non_finite_action_of_any_mission_and_changes_nothi
         ValueError, match=r"actions: expected shape \(3, 6\) \(one flat action per mission\), got shape \(3, 2, 3\)"
     ):
         env.step(np.zeros((3, N_ROBOTS, 3)))
-    after = (env.positions, env.arrived, env.step_counts, env._outage_steps)
+    after = (env.positions, env.arrived, env.step_counts, env.core.outage_steps)
     for old, new in zip(before, after, strict=True):
         np.testing.assert_array_equal(old, new)
     env.step(np.zeros((3, 3 * N_ROBOTS)))  # still usable

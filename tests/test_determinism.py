@@ -23,6 +23,9 @@ from noma_radiomap.planners import CommAwarePlanner, ShortestPathPlanner, channe
 INFO_KEYS = ("rate_bps", "sinr_db", "outage", "power_w", "gain_db", "decoding_order")
 SUMMARY_KEYS = ("is_success", "mqi", "mission_time", "outage_steps")
 COMPONENTS = ("time", "inducing", "qos", "arrival", "success")
+#: The observation the digests were recorded with (positions, destinations, gains, arrived flags), given explicitly
+#: so that they do not follow the ids' default layout.
+OBSERVATION = {"observation": "destinations"}
 
 ROLLOUTS: dict[str, tuple[str, dict]] = {
     "noma": ("NomaRadioMap-v0", {}),
@@ -115,7 +118,7 @@ def _update(digest: "hashlib._Hash", value) -> None:
 
 def rollout_digest(env_id: str, kwargs: dict, n_steps: int = 400, seed: int = 3) -> str:
     """Hash of a seeded random-action rollout of ``n_steps`` steps across resets."""
-    env = gym.make(env_id, **kwargs)
+    env = gym.make(env_id, **OBSERVATION, **kwargs)
     rng = np.random.default_rng(seed)
     env.action_space.seed(seed)
     digest = hashlib.sha256()
@@ -161,7 +164,7 @@ PLANNERS = {
 def planner_digest(name: str, n_episodes: int = 3, seed: int = 5) -> str:
     """Hash of the actions, rewards and end-of-episode figures of a planner's seeded episodes on ``small``."""
     env_id, planner_class = PLANNERS[name]
-    env = gym.make(env_id, scenario="small")
+    env = gym.make(env_id, scenario="small", **OBSERVATION)
     planner = planner_class()
     digest = hashlib.sha256()
     for episode in range(n_episodes):
@@ -187,7 +190,7 @@ def training_digest() -> str:
     from sb3_dtdpg.common.phases import Phase
 
     th.set_num_threads(1)
-    env = gym.make("NomaRadioMap-v0", scenario="small")
+    env = gym.make("NomaRadioMap-v0", scenario="small", **OBSERVATION)
     phases = [
         Phase("destination", n_timesteps=700, sigma=0.5, final_sigma=0.1, decay_episodes=20),
         Phase("mqi", sigma=0.4, final_sigma=0.05, decay_episodes=20, replay_handling="relabel"),

@@ -15,7 +15,6 @@ from noma_radiomap.downlink import (
     downlink,
     equivalent_gain,
     in_outage,
-    single_transmission,
 )
 
 B = 15_000.0  # Hz per robot (Table I)
@@ -189,18 +188,15 @@ def test_batch_gives_the_same_bits_as_one_mission(placement, mode):
 
 
 @settings(max_examples=200, deadline=None)
-@given(placements, st.sampled_from(["noma", "oma"]))
-def test_single_transmission_gives_the_bits_of_the_batched_functions(placement, mode):
-    # The env's per-step float path is the batched model with the loops written out: the same bits.
-    actions, log_gain, log_interference = placement
-    gain, interference = 10**log_gain, 10**log_interference
-    power, result = single_transmission(actions.tolist(), gain.tolist(), interference.tolist(), P_MAX, B, N0, mode)
-    expected_power = allocate_power(actions, P_MAX)
-    expected = downlink(expected_power, gain, interference, B, N0, mode)
-    np.testing.assert_array_equal(power, expected_power)
-    np.testing.assert_array_equal(result.rate_bps, expected.rate_bps)
-    np.testing.assert_array_equal(result.sinr_db, expected.sinr_db)
-    np.testing.assert_array_equal(result.decoding_order, expected.decoding_order)
+@given(placements, st.data())
+def test_inactive_robots_get_the_power_of_action_minus_one(placement, data):
+    # allocate_power(..., active): an inactive robot's action counts as -1 (no power), bit for bit, and the
+    # active robots share P_max as if the inactive ones had asked for nothing.
+    actions = placement[0]
+    active = data.draw(arrays(np.bool_, len(actions)))
+    power = allocate_power(actions, P_MAX, active=active)
+    np.testing.assert_array_equal(power, allocate_power(np.where(active, actions, -1.0), P_MAX))
+    assert np.all(power[~active] == 0.0) and power.sum() <= P_MAX * (1 + 1e-12)
 
 
 def test_noma_intra_cluster_power_sums_down_the_decoding_order():

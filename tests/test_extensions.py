@@ -14,7 +14,7 @@ from sb3_dtdpg.common.demonstrations import DemonstrationCallback
 
 
 def _small(**kwargs) -> gym.Env:
-    return gym.make("NomaRadioMap-v0", scenario="small", **kwargs)
+    return gym.make("NomaRadioMap-v0", scenario="small", **{"observation": "destinations", **kwargs})
 
 
 def test_relative_goal_features_point_at_the_destination():

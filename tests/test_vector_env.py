@@ -110,7 +110,7 @@ def test_make_vec_gives_the_transitions_of_a_sync_vector_env(env_id, kwargs):
 
 def test_move_batch_gives_the_bits_of_move():
     env = gym.make("NomaRadioMap-v0").unwrapped
-    motion, rng = env._motion, np.random.default_rng(3)
+    motion, rng = env.core.motion, np.random.default_rng(3)
     free = np.argwhere(~env.radio_map.blocked)
     positions = (
         free[rng.integers(len(free), size=(64, 2))] + rng.uniform(0.0, 1.0, (64, 2, 2))
@@ -154,7 +154,7 @@ def test_make_mission_vec_env_monitors_episodes():
     assert dones.all()
     for info in infos:
         assert set(info["episode"]) == {"r", "l", "t", "is_success"} and info["episode"]["l"] == 5
-        assert info["TimeLimit.truncated"] and "mqi" in info and info["terminal_observation"].shape == (12,)
+        assert info["TimeLimit.truncated"] and "mqi" in info and info["terminal_observation"].shape == (18,)
 
 
 @pytest.mark.parametrize(

@@ -41,7 +41,7 @@ class DownlinkResult(NamedTuple):
     same ordering, informational only)."""
 
 
-def allocate_power(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
+def allocate_power(power_actions: np.ndarray, max_power_w: float, active: np.ndarray | None = None) -> np.ndarray:
     """
     Map power actions to transmit powers (docs/MODEL.md, power mapping): ``p_u = P_max (a_u + 1) / 2``; if
     ``sum_u p_u > P_max``, all powers are scaled down by the same factor so that they sum to ``P_max``
@@ -49,20 +49,24 @@ def allocate_power(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
 
     :param power_actions: actions ``a_u``, shape (..., U); clipped to [-1, 1]
     :param max_power_w: ``P_max`` in watts
+    :param active: robots that get power, bool (..., U) (the others' actions count as -1: no power); None: all
     :return: allocated powers in watts, shape (..., U), summing to at most ``P_max``
     """
     actions = np.asarray(power_actions, dtype=np.float64)
-    return _allocate_rows(actions.reshape(-1, actions.shape[-1]), float(max_power_w)).reshape(actions.shape)
+    rows = (-1, actions.shape[-1])
+    mask = np.ones(actions.shape, dtype=np.bool_) if active is None else np.broadcast_to(active, actions.shape)
+    return allocate_rows(actions.reshape(rows), mask.reshape(rows), float(max_power_w)).reshape(actions.shape)
 
 
 @compiled
-def _allocate_rows(power_actions: np.ndarray, max_power_w: float) -> np.ndarray:
-    """:func:`allocate_power` on (M, U) actions, compiled; each row's powers summed left to right."""
+def allocate_rows(power_actions: np.ndarray, active: np.ndarray, max_power_w: float) -> np.ndarray:
+    """:func:`allocate_power` on (M, U) actions and active flags, compiled; each row's powers summed left to right."""
     power = np.empty(power_actions.shape)
     for row in range(power_actions.shape[0]):
         total = 0.0
         for u in range(power_actions.shape[1]):
-            power[row, u] = (0.5 * max_power_w) * (min(max(power_actions[row, u], -1.0), 1.0) + 1.0)
+            action = min(max(power_actions[row, u], -1.0), 1.0) if active[row, u] else -1.0
+            power[row, u] = (0.5 * max_power_w) * (action + 1.0)
             total += power[row, u]
         power[row] *= min(1.0, max_power_w / max(total, _TINY))
     return power
@@ -229,66 +233,6 @@ def downlink(
     else:
         raise ValueError(f"multiple_access must be one of {MULTIPLE_ACCESS}, got {multiple_access!r}")
     return DownlinkResult(rate_bps=rate, sinr_db=sinr_to_db(sinr), decoding_order=order)
-
-
-def single_transmission(
-    power_actions: list[float],
-    gain: list[float],
-    interference_w: list[float],
-    max_power_w: float,
-    bandwidth_per_robot_hz: float,
-    noise_w_per_hz: float,
-    multiple_access: MultipleAccess = "noma",
-) -> tuple[np.ndarray, DownlinkResult]:
-    """
-    :func:`allocate_power` then :func:`downlink` for one mission, on Python floats: the env's per-step fast
-    path (numpy calls on arrays of U = 2 elements cost more than the arithmetic; ``benchmarks/env_speed.py``).
-
-    The SINRs come from the same :func:`sic_sinr` / :func:`fdma_sinr`, the rates and dB values from
-    :func:`shannon_rate` and :func:`sinr_to_db`; only the loops over the robots are written out. The tests
-    check that it gives the same bits as the batched functions.
-
-    :param power_actions: power actions ``a_u`` (U floats), clipped to [-1, 1]
-    :param gain: linear channel gains ``g_u`` (U floats)
-    :param interference_w: interference powers ``I_u`` over the cluster band in watts (U floats)
-    :param max_power_w: ``P_max`` in watts
-    :param bandwidth_per_robot_hz: ``B`` in Hz
-    :param noise_w_per_hz: ``N0`` in W/Hz
-    :param multiple_access: ``"noma"`` or ``"oma"``
-    :return: the allocated powers (U,) and the :class:`DownlinkResult`
-    """
-    n_robots = len(power_actions)
-    # allocate_power() on floats, summed left to right (Python 3.12's sum() compensates its rounding)
-    power = [(0.5 * max_power_w) * (min(max(a, -1.0), 1.0) + 1.0) for a in power_actions]
-    total = 0.0
-    for p in power:
-        total += p
-    if total > max_power_w:
-        power = [p * (max_power_w / total) for p in power]
-    cluster_band_hz = n_robots * bandwidth_per_robot_hz
-    cluster_noise_w = noise_w_per_hz * cluster_band_hz
-    equivalent = [equivalent_gain(g, i, cluster_noise_w) for g, i in zip(gain, interference_w, strict=True)]
-    order = sorted(range(n_robots), key=equivalent.__getitem__)  # stable, like decoding_order()
-    sinr = [0.0] * n_robots
-    if multiple_access == "noma":
-        stronger = 0.0
-        for u in reversed(order):  # from the strongest down, like noma_sinr's cumulative sum
-            sinr[u] = sic_sinr(power[u], gain[u], stronger, interference_w[u], cluster_noise_w)
-            stronger += power[u]
-        band_hz = cluster_band_hz
-    elif multiple_access == "oma":
-        noise_w = noise_w_per_hz * bandwidth_per_robot_hz
-        sinr = [fdma_sinr(p, g, i, n_robots, noise_w) for p, g, i in zip(power, gain, interference_w, strict=True)]
-        band_hz = bandwidth_per_robot_hz
-    else:
-        raise ValueError(f"multiple_access must be one of {MULTIPLE_ACCESS}, got {multiple_access!r}")
-    sinr_array = np.array(sinr)
-    result = DownlinkResult(
-        rate_bps=shannon_rate(sinr_array, band_hz),
-        sinr_db=sinr_to_db(sinr_array),
-        decoding_order=np.array(order, dtype=np.int64),
-    )
-    return np.array(power), result
 
 
 def in_outage(rate_bps: np.ndarray, qos_rate_bps: float) -> np.ndarray:

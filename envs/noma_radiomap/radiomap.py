@@ -309,7 +309,7 @@ class RadioMap:
         return field
 
     # ----------------------------------------------------------------------------------------------
-    # Plotting (paper Fig. 4); matplotlib is imported lazily
+    # Plotting (paper Fig. 4): noma_radiomap.rendering, imported (with matplotlib) on the first plot
     # ----------------------------------------------------------------------------------------------
 
     def plot(
@@ -343,133 +343,19 @@ class RadioMap:
         :param imshow_kwargs: passed to ``ax.imshow`` (e.g. ``cmap``, ``vmin``, ``vmax``)
         :return: the axes
         """
-        import matplotlib.pyplot as plt
-        from matplotlib.patches import Rectangle
-        from matplotlib.patheffects import withStroke
+        from noma_radiomap.rendering import plot_radio_map
 
-        from noma_radiomap.rendering import legend_below
-
-        outlined = [withStroke(linewidth=2.2, foreground="black")]  # readable on any map colour and on white
-
-        if kind not in ("sinr", "power"):
-            raise ValueError(f"kind: expected 'sinr' or 'power', got {kind!r}")
-        if ax is None:
-            _, ax = plt.subplots(figsize=(8, 5.4))
-        room = self.scenario.room
-        values = self.sinr_map_db if kind == "sinr" else self.power_map_dbm
-        label = "SINR (dB)" if kind == "sinr" else "received power (dBm)"
-        imshow_kwargs.setdefault("cmap", "viridis")
-        image = ax.imshow(values.T, origin="lower", extent=(0.0, room.width, 0.0, room.depth), **imshow_kwargs)
-        walls = Rectangle((0.0, 0.0), room.width, room.depth, fill=False, ec="black", lw=1.2, zorder=3)
-        ax.add_patch(walls)
-        if colorbar:
-            # An inset keeps the bar exactly as tall as the map, whatever the figure's layout.
-            ax.figure.colorbar(image, cax=ax.inset_axes((1.03, 0.0, 0.03, 1.0)), label=label)
-        outage = self.outage_map() if show_outage and kind == "sinr" else None
-        if outage is not None and outage.any():
-            # Padded by one cell so the region closes at the walls; clipped to the room.
-            padded = np.pad(outage.T.astype(float), 1, mode="edge")
-            x = (np.arange(self.nx + 2) - 0.5) * self.resolution
-            y = (np.arange(self.ny + 2) - 0.5) * self.resolution
-            with plt.rc_context({"hatch.color": "red", "hatch.linewidth": 0.6}):
-                fill = ax.contourf(x, y, padded, levels=[0.5, 1.5], colors="none", hatches=["////"])
-            lines = ax.contour(x, y, padded, levels=[0.5], colors="red", linewidths=0.8)
-            for artist in (fill, lines):
-                artist.set_clip_path(walls)
-            with plt.rc_context({"hatch.color": "red", "hatch.linewidth": 0.6}):
-                ax.add_patch(
-                    Rectangle((0, 0), 0, 0, fc="none", ec="red", hatch="////", label="outage (one robot, full AP power)")
-                )
-        if show_obstacles:
-            body = self.scenario.robot.body_height
-            labelled: set[bool] = set()
-            for x0, y0, x1, y1, z0, _ in self.boxes:
-                if x0 <= 0 and y0 <= 0 and x1 >= room.width and y1 >= room.depth:
-                    continue  # a floor slab over the whole room
-                blocks_motion = bool(z0 < body)
-                text = "obstacle (blocks robots and radio)" if blocks_motion else "hanging obstacle (blocks radio only)"
-                ax.add_patch(
-                    Rectangle(
-                        (x0, y0),
-                        x1 - x0,
-                        y1 - y0,
-                        fill=False,
-                        lw=0.8,
-                        ec="white",
-                        ls="-" if blocks_motion else "--",
-                        path_effects=outlined,
-                        label=None if blocks_motion in labelled else text,
-                    )
-                )
-                labelled.add(blocks_motion)
-        limits = [[0.0, room.width], [0.0, room.depth]]
-        if show_transmitters:
-            x, y, z = self.scenario.ap.position
-            ax.plot(x, y, marker="*", ms=14, color="red", mec="black", ls="none", label=f"AP (z = {z:g} m)")
-            reach = 0.2 * max(room.width, room.depth)
-            for k, interferer in enumerate(self.scenario.interferers):
-                x, y, z = interferer.position
-                edge = np.array([np.clip(x, 0, room.width), np.clip(y, 0, room.depth)])
-                distance = float(np.hypot(x - edge[0], y - edge[1]))
-                far = distance > reach
-                marker = edge if far else np.array([x, y])
-                ax.plot(
-                    *marker,
-                    marker="X",
-                    ms=11,
-                    color="orange",
-                    mec="black",
-                    ls="none",
-                    clip_on=False,
-                    zorder=4,
-                    label="interferer (name, antenna height)" if k == 0 else None,
-                )
-                text = f"{interferer.name} (z = {z:g} m)"
-                if far:
-                    ux, uy = (np.array([x, y]) - edge) / distance
-                    arrow = ax.annotate(
-                        "",
-                        marker,
-                        xytext=(-28 * ux, -28 * uy),
-                        textcoords="offset points",
-                        arrowprops={"arrowstyle": "->", "color": "orange", "lw": 2, "shrinkB": 7},
-                        annotation_clip=False,
-                        zorder=4,
-                    )
-                    arrow.arrow_patch.set_path_effects(outlined)
-                    text = f"{interferer.name} ({distance:.0f} m outside, z = {z:g} m)"
-                else:
-                    limits[0] = [min(limits[0][0], x), max(limits[0][1], x)]
-                    limits[1] = [min(limits[1][0], y), max(limits[1][1], y)]
-                # Offset towards the room's centre, so the label stays inside the axes.
-                dx = -1 if marker[0] > room.width / 2 else 1
-                dy = -1 if marker[1] > room.depth / 2 else 1
-                ax.annotate(
-                    text,
-                    marker,
-                    textcoords="offset points",
-                    xytext=(6 * dx, 6 * dy),
-                    ha="right" if dx < 0 else "left",
-                    va="top" if dy < 0 else "bottom",
-                    color="orange",
-                    fontsize=8,
-                    fontweight="bold",
-                    path_effects=outlined,
-                    annotation_clip=False,
-                )
-        extended = limits != [[0.0, room.width], [0.0, room.depth]]
-        margin = 0.03 * max(room.width, room.depth) if extended else 0.0
-        ax.set_xlim(limits[0][0] - margin * (limits[0][0] < 0), limits[0][1] + margin * (limits[0][1] > room.width))
-        ax.set_ylim(limits[1][0] - margin * (limits[1][0] < 0), limits[1][1] + margin * (limits[1][1] > room.depth))
-        if extended:
-            ax.set_facecolor("0.85")
-            ax.add_patch(Rectangle((0, 0), 0, 0, fc="0.85", ec="black", label="outside the room"))
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_title(f"{self.scenario.name}: {'SINR map' if kind == 'sinr' else 'power distribution map'}")
-        if legend:
-            legend_below(ax)
-        return ax
+        return plot_radio_map(
+            self,
+            ax,
+            kind=kind,
+            show_obstacles=show_obstacles,
+            show_transmitters=show_transmitters,
+            show_outage=show_outage,
+            colorbar=colorbar,
+            legend=legend,
+            **imshow_kwargs,
+        )
 
     def plot_maps(self, path: str | None = None, dpi: int = 120) -> Figure:
         """
@@ -479,16 +365,9 @@ class RadioMap:
         :param dpi: resolution of the saved figure
         :return: the figure
         """
-        import matplotlib.pyplot as plt
+        from noma_radiomap.rendering import plot_radio_maps
 
-        figure, axes = plt.subplots(1, 2, figsize=(15, 5.6), layout="constrained")
-        self.plot(axes[0], kind="power", legend=False)
-        self.plot(axes[1], kind="sinr", legend=False)
-        handles, labels = axes[1].get_legend_handles_labels()
-        figure.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 4), fontsize=9, frameon=False)
-        if path is not None:
-            figure.savefig(path, dpi=dpi)
-        return figure
+        return plot_radio_maps(self, path, dpi)
 
     def __repr__(self) -> str:
         return f"RadioMap(scenario={self.scenario.name!r}, shape={self.shape}, transmitters={list(self.transmitters)})"

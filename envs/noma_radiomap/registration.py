@@ -7,10 +7,13 @@ again, or Gymnasium importing it for an id written ``"noma_radiomap:NomaRadioMap
 Episodes are truncated only by Gymnasium's ``TimeLimit``, at the scenario's ``mission.max_steps``: the entry
 point :func:`make_env` builds the env and wraps it in a ``TimeLimit`` of its own scenario's length, so
 ``gymnasium.make("NomaRadioMap-v0", scenario="small").spec.max_episode_steps`` is ``small``'s 60 and the
-default ``mall`` gives 300. ``gymnasium.make(..., max_episode_steps=n)`` adds a shorter limit on top.
+default ``mall`` gives 300 (the paper's task: 1000). ``gymnasium.make(..., max_episode_steps=n)`` adds a shorter
+limit on top: the env cannot see it, so every ``info`` of the single env carries the episode summary as of that
+step (``mqi``, ``is_success``, ...), and the last one of an episode has it whatever limit ends the episode.
 
 ``gymnasium.make_vec(env_id, num_envs=N)`` builds the batched :class:`~noma_radiomap.vector.NomaRadioMapVecEnv`
-(the ids' ``vector_entry_point``); ``vectorization_mode="sync"`` gives Gymnasium's ``SyncVectorEnv`` of single envs.
+(the ids' ``vector_entry_point``; its truncation: its ``max_episode_steps`` kwarg); ``vectorization_mode="sync"``
+gives Gymnasium's ``SyncVectorEnv`` of single envs.
 """
 
 from typing import Any
@@ -19,6 +22,10 @@ import gymnasium as gym
 from gymnasium.wrappers import TimeLimit
 
 from noma_radiomap.env import NomaRadioMapEnv
+from noma_radiomap.observations import OBSERVATIONS as _LAYOUTS
+from noma_radiomap.observations import check_observation
+
+__all__ = ["ENV_IDS", "OBSERVATIONS", "check_observation", "make_env", "register_envs"]
 
 ENTRY_POINT = "noma_radiomap.registration:make_env"
 VECTOR_ENTRY_POINT = "noma_radiomap.vector:make_vec_env"
@@ -29,38 +36,26 @@ ENV_IDS: dict[str, dict[str, str]] = {
     "NomaRadioMapOMA-v0": {"multiple_access": "oma", "channel": "radio_map"},
     "NomaRadioMapReality-v0": {"multiple_access": "noma", "channel": "rayleigh"},
     "NomaRadioMapOMAReality-v0": {"multiple_access": "oma", "channel": "rayleigh"},
+    # The paper's task (docs/MODEL.md): fixed destinations, the paper's state Eq. (24), 1000-step episodes
+    "NomaRadioMapPaper-v0": {"multiple_access": "noma", "channel": "radio_map", "task": "paper"},
+    "NomaRadioMapPaperOMA-v0": {"multiple_access": "oma", "channel": "radio_map", "task": "paper"},
 }
 
-
-#: Observation layouts of :func:`make_env`: the paper's (the env's own) and the goal-conditioned extension.
-OBSERVATIONS: tuple[str, ...] = ("paper", "goal")
-
-
-def check_observation(observation: str) -> None:
-    """:raises ValueError: ``observation`` is not one of :data:`OBSERVATIONS`"""
-    if observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+#: The observation layouts (:mod:`noma_radiomap.observations`), the default (``"goal"``) first.
+OBSERVATIONS: tuple[str, ...] = tuple(_LAYOUTS)
 
 
-def make_env(observation: str = "paper", **kwargs: Any) -> gym.Env:
+def make_env(**kwargs: Any) -> gym.Env:
     """
     The entry point of the registered ids: :class:`NomaRadioMapEnv` in a ``TimeLimit`` of its scenario's
     ``mission.max_steps``.
 
-    :param observation: ``"paper"`` (the paper's state, ``6U`` values) or ``"goal"`` (the goal-conditioned
-        extension: :class:`noma_radiomap.wrappers.RelativeGoalObservation` adds each robot's direction and
-        distance to its destination, ``9U`` values; docs/BENCHMARKS.md measures what it changes)
-    :param kwargs: the arguments of :class:`NomaRadioMapEnv`
+    :param kwargs: the arguments of :class:`NomaRadioMapEnv` (``observation``: ``"goal"``, the default,
+        ``"destinations"`` or ``"paper"``, :mod:`noma_radiomap.observations`; ``task``: ``"missions"`` or ``"paper"``)
     :return: the wrapped env
     """
-    check_observation(observation)
     env = NomaRadioMapEnv(**kwargs)
-    wrapped: gym.Env = TimeLimit(env, max_episode_steps=env.max_steps)
-    if observation == "goal":
-        from noma_radiomap.wrappers import RelativeGoalObservation
-
-        wrapped = RelativeGoalObservation(wrapped)
-    return wrapped
+    return TimeLimit(env, max_episode_steps=env.max_steps)
 
 
 # gymnasium.make reads the creator's render modes from here, as it does from an env class

@@ -101,18 +101,50 @@ def reward_components(
         robots_shape = np.broadcast_shapes(robots_shape, arriving.shape, outage.shape, distance.shape)
         active, arriving, outage, distance = (np.broadcast_to(x, robots_shape) for x in (active, arriving, outage, distance))
     shape, rows = robots_shape[:-1], (-1, robots_shape[-1])
-    values = _component_values(
-        active.reshape(rows),
-        arriving.reshape(rows),
-        outage.reshape(rows),
-        distance.reshape(rows),
+    values = component_values(
+        active.reshape(rows), arriving.reshape(rows), outage.reshape(rows), distance.reshape(rows), d_max, constants
+    )
+    return dict(zip(REWARD_COMPONENTS, values.reshape(len(REWARD_COMPONENTS), *shape), strict=True))
+
+
+def component_values(
+    active: np.ndarray,
+    arriving: np.ndarray,
+    outage: np.ndarray,
+    distance: np.ndarray,
+    d_max: float,
+    constants: RewardConstants,
+) -> np.ndarray:
+    """
+    :func:`reward_components` of (M, U) robots (bool arrays and float64 distances of exactly that shape: the
+    mission engine's fast path), as the rows of a (5, M) array in the order of :data:`REWARD_COMPONENTS`.
+    """
+    return _component_values(
+        active,
+        arriving,
+        outage,
+        distance,
         float(d_max),
         float(constants.time_cost),
         float(constants.outage_penalty),
         float(constants.arrival_reward),
         float(constants.success_reward),
     )
-    return dict(zip(REWARD_COMPONENTS, values.reshape(len(REWARD_COMPONENTS), *shape), strict=True))
+
+
+@compiled
+def weighted_rows(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """
+    :func:`weighted_reward` of (5, M) component values with (5, M) weights (a phase per mission), compiled:
+    per mission ``0.0 + w_0 c_0 + w_1 c_1 + ...``, summed in the order of :data:`REWARD_COMPONENTS`.
+    """
+    reward = np.empty(values.shape[1])
+    for row in range(values.shape[1]):
+        total = 0.0
+        for k in range(values.shape[0]):
+            total = total + weights[k, row] * values[k, row]
+        reward[row] = total
+    return reward
 
 
 @compiled

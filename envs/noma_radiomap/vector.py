@@ -1,47 +1,26 @@
 """N missions stepped at once: :class:`NomaRadioMapVecEnv`, the Gymnasium vector env of the mission ids
 (docs/ARCHITECTURE.md, vector env).
 
-Every stage of :meth:`NomaRadioMapEnv.step` runs once per step on arrays over (N, U) through the same
-physics functions (motion, channel, downlink, rewards, observation), so mission ``i`` of a vector env whose
-missions are seeded ``seed + i`` makes exactly the transitions of a single env seeded ``seed + i``. Each
-mission keeps its own random generator (the starts and destinations of its resets, its Rayleigh fading),
-which is the only per-mission Python loop of a step, and only in the ``rayleigh`` channel.
+It drives the mission engine :class:`noma_radiomap.core.MissionCore` with N missions, the engine the single
+env drives with one, so mission ``i`` of a vector env whose missions are seeded ``seed + i`` makes exactly the
+transitions of a single env seeded ``seed + i``. Each mission keeps its own random generator (the starts and
+destinations of its resets, its Rayleigh fading).
 """
 
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from noma_radiomap import geometry, rewards
+from noma_radiomap import rewards
 from noma_radiomap.actions import check_actions
-from noma_radiomap.compiled import compiled
-from noma_radiomap.downlink import allocate_power, downlink, in_outage
-from noma_radiomap.env import NomaRadioMapEnv, mission_observation
-from noma_radiomap.propagation import faded_gain, interference_power, linear_to_db, rayleigh_fading
-from noma_radiomap.registration import check_observation
-from noma_radiomap.wrappers import RelativeGoalObservation, goal_features
+from noma_radiomap.core import INFO_KEYS, SUMMARY_KEYS, MissionCore, MissionStep, summary_row
+from noma_radiomap.env import NomaRadioMapEnv
+from noma_radiomap.observations import observation_space
 
-
-@dataclass
-class BatchStep:
-    """The outcome of one step of the stepped missions (arrays over the stepped rows)."""
-
-    rows: np.ndarray
-    reward: np.ndarray
-    terminated: np.ndarray
-    truncated: np.ndarray
-    components: dict[str, np.ndarray]
-    power_w: np.ndarray
-    rate_bps: np.ndarray
-    sinr_db: np.ndarray
-    decoding_order: np.ndarray
-    outage: np.ndarray
-    gain_db: np.ndarray
+__all__ = ["MissionView", "NomaRadioMapVecEnv", "make_vec_env"]
 
 
 class MissionView:
@@ -55,49 +34,57 @@ class MissionView:
     """
 
     def __init__(self, vec_env: "NomaRadioMapVecEnv", index: int) -> None:
-        self._vec, self._index = vec_env, index
+        self.vec_env, self.index = vec_env, index
 
     def set_reward_phase(self, name: str) -> None:
-        self._vec.set_reward_phase(name, indices=[self._index])
+        self.vec_env.set_reward_phase(name, indices=[self.index])
 
     def reward_weights(self, phase: str | None = None) -> dict[str, float]:
         return rewards.phase_weights(self.reward_phase if phase is None else phase)
 
     @property
     def reward_phase(self) -> str:
-        return self._vec.reward_phases[self._index]
+        return self.vec_env.core.reward_phases[self.index]
 
     def episode_summary(self) -> dict[str, Any]:
-        summary = self._vec.episode_summaries(np.array([self._index]))
-        return {
-            key: value[0] if key in ("mission_time", "outage_steps") else value[0].item() for key, value in summary.items()
-        }
+        return summary_row(self.vec_env.core.episode_summaries(np.array([self.index])), 0)
 
     @property
     def positions(self) -> np.ndarray:
-        return self._vec.positions[self._index].copy()
+        return self.vec_env.core.positions[self.index].copy()
 
     @property
     def destinations(self) -> np.ndarray:
-        return self._vec.destinations[self._index].copy()
+        return self.vec_env.core.destinations[self.index].copy()
 
     @property
     def arrived(self) -> np.ndarray:
-        return self._vec.arrived[self._index].copy()
+        return self.vec_env.core.arrived[self.index].copy()
 
     @property
     def step_count(self) -> int:
-        return int(self._vec.step_counts[self._index])
+        return int(self.vec_env.core.step_counts[self.index])
 
     @property
     def np_random(self) -> np.random.Generator:
-        return self._vec.np_randoms[self._index]
+        return self.vec_env.core.np_randoms[self.index]
+
+    @property
+    def observation_space(self) -> gym.spaces.Box:
+        return self.vec_env.single_observation_space
+
+    @property
+    def action_space(self) -> gym.spaces.Box:
+        return self.vec_env.single_action_space
 
     def __getattr__(self, name: str) -> Any:
-        # The static attributes and constants are those of the template env (scenario, radio_map, ...).
+        # The static attributes and constants are those of the vector env's engine and of the env class
         if name.startswith("_"):
             raise AttributeError(name)
-        return getattr(self._vec.template, name)
+        core = self.vec_env.core
+        if hasattr(core, name):
+            return getattr(core, name)
+        return getattr(NomaRadioMapEnv, name)
 
 
 class NomaRadioMapVecEnv(VectorEnv):
@@ -105,17 +92,18 @@ class NomaRadioMapVecEnv(VectorEnv):
     ``num_envs`` missions of :class:`~noma_radiomap.NomaRadioMapEnv` stepped at once with array operations
     over (N, U): the ``vector_entry_point`` of the registered ids, so
     ``gymnasium.make_vec("NomaRadioMap-v0", num_envs=8)`` builds it. For Stable-Baselines3, use
-    :func:`sb3_dtdpg.make_mission_vec_env` (an SB3 ``VecEnv`` over the same engine).
+    :func:`sb3_dtdpg.vec_env.make_mission_vec_env` (an SB3 ``VecEnv`` over the same engine).
 
-    Observations ``(N, 6U)``, actions ``(N, 3U)``, rewards, terminations and truncations ``(N,)``: those of the
-    single env (see its docstring), truncated at ``max_episode_steps`` (default: the scenario's
-    ``mission.max_steps``, as the registered ids' ``TimeLimit``). ``reset(seed=s)`` seeds mission ``i`` with
-    ``s + i`` (or takes a list of seeds), like Gymnasium's ``SyncVectorEnv``; ``options`` (``starts``,
-    ``destinations``, ``reset_mask``) apply to every reset mission. Autoreset follows Gymnasium's default
-    ``AutoresetMode.NEXT_STEP``: the step after an episode ends resets that mission (reward 0, its action
-    ignored). ``infos`` are Gymnasium's dict of arrays with ``_key`` masks: every key of the single env's
-    ``info`` (``reward_components`` a dict of (N,) arrays), and ``is_success``, ``mqi``, ``mission_time``,
-    ``outage_steps`` for the missions whose episode ends on the step.
+    Observations ``(N, values per robot x U)`` (the layout of ``observation``), actions ``(N, 3U)``, rewards,
+    terminations and truncations ``(N,)``: those of the single env (see its docstring), truncated at
+    ``max_episode_steps`` (default: the scenario's ``mission.max_steps``, as the registered ids' ``TimeLimit``).
+    ``reset(seed=s)`` seeds mission ``i`` with ``s + i`` (or takes a list of seeds), like Gymnasium's
+    ``SyncVectorEnv``; ``options`` (``starts``, ``destinations``, ``reset_mask``) apply to every reset mission.
+    Autoreset follows Gymnasium's default ``AutoresetMode.NEXT_STEP``: the step after an episode ends resets that
+    mission (reward 0, its action ignored). ``infos`` are Gymnasium's dict of arrays with ``_key`` masks: every key
+    of the single env's ``info`` (``reward_components`` a dict of (N,) arrays), and ``is_success``, ``mqi``,
+    ``mission_time``, ``outage_steps`` (the episode summary as of the step, as the single env gives it). Stepping or
+    summarising a mission before its first reset raises Gymnasium's ``ResetNeeded``.
 
     ``set_reward_phase(name, indices=None)``, ``reward_weights(phase=None)``, ``call(name, ...)`` and
     ``get_attr(name)`` reach every mission (:class:`MissionView`) as ``SyncVectorEnv`` reaches its envs.
@@ -125,11 +113,15 @@ class NomaRadioMapVecEnv(VectorEnv):
         ``reward_phase``, ``inducing``)
     :param max_episode_steps: truncation length (None: the scenario's ``mission.max_steps``; at most that)
     :param render_mode: only None (render a single env to see a mission)
-    :param observation: ``"paper"`` (the env's own) or ``"goal"`` (as
-        :class:`~noma_radiomap.wrappers.RelativeGoalObservation` adds it to a single env)
+    :param observation: the observation layout (:mod:`noma_radiomap.observations`; None: ``"goal"``, or
+        ``"paper"`` with ``task="paper"``)
+    :param task: ``"missions"`` or ``"paper"`` (see :class:`~noma_radiomap.NomaRadioMapEnv`)
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    REWARD_PHASES: ClassVar[tuple[str, ...]] = rewards.REWARD_PHASES
+    REWARD_COMPONENTS: ClassVar[tuple[str, ...]] = rewards.REWARD_COMPONENTS
 
     def __init__(
         self,
@@ -141,49 +133,37 @@ class NomaRadioMapVecEnv(VectorEnv):
         inducing: str = "euclidean",
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
-        observation: str = "paper",
+        observation: str | None = None,
+        task: str = "missions",
     ) -> None:
-        check_observation(observation)
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if render_mode is not None:
             raise ValueError(f"render_mode: the vector env does not render (use a single env), got {render_mode!r}")
-        self.template = NomaRadioMapEnv(scenario, multiple_access, channel, reward_phase, inducing)
-        env = self.template
-        limit = env.max_steps if max_episode_steps is None else int(max_episode_steps)
-        if limit < 1:
-            raise ValueError(f"max_episode_steps must be >= 1, got {max_episode_steps!r}")
-        self.max_episode_steps = min(limit, env.max_steps)
+        #: The mission engine, N missions (:class:`noma_radiomap.core.MissionCore`)
+        self.core = MissionCore(
+            int(num_envs), scenario, multiple_access, channel, reward_phase, inducing, observation, task, max_episode_steps
+        )
+        core = self.core
         self.num_envs = int(num_envs)
         self.render_mode = None
-        self.observation = observation
-        self._goal = RelativeGoalObservation(env) if observation == "goal" else None  # its space and scale
-        self.single_observation_space = env.observation_space if self._goal is None else self._goal.observation_space
-        self.single_action_space = env.action_space
+        self.observation = core.observation
+        self.n_robots = core.n_robots
+        self.max_steps = core.max_steps
+        self.max_episode_steps = core.max_episode_steps
+        self.single_observation_space = observation_space(self.observation, self.n_robots)
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (3 * self.n_robots,), dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(env.action_space, self.num_envs)
-        self.n_robots = env.n_robots
-        self.max_steps = env.max_steps
-        self.REWARD_PHASES = env.REWARD_PHASES
-        self.REWARD_COMPONENTS = env.REWARD_COMPONENTS
-
-        n, u = self.num_envs, self.n_robots
-        self.np_randoms: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(n)]
-        self.reward_phases = [reward_phase] * n
-        # The weight of each reward component per mission (the phase may differ between missions)
-        self._weights = {name: np.full(n, weight) for name, weight in rewards.phase_weights(reward_phase).items()}
-        self.positions = np.zeros((n, u, 2))
-        self.destinations = np.zeros((n, u, 2))
-        self.arrived = np.zeros((n, u), dtype=bool)
-        self.step_counts = np.zeros(n, dtype=np.int64)
-        self._arrival_step = np.full((n, u), env.max_steps, dtype=np.int64)
-        self._outage_steps = np.zeros((n, u), dtype=np.int64)
-        self._gain_db = np.zeros((n, u))
-        self._distance_maps = np.zeros((n, u, 0))
-        self._autoreset = np.zeros(n, dtype=bool)
-        self._all_rows = np.arange(n)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        self._rows_all = np.arange(self.num_envs)
 
     # --- reward phases and per-mission access -----------------------------------------------------
+    @property
+    def reward_phases(self) -> list[str]:
+        """The reward phase of each mission."""
+        return list(self.core.reward_phases)
+
     def set_reward_phase(self, name: str, indices: Any = None) -> None:
         """
         Switch the reward phase of some missions (takes effect from their next step).
@@ -191,12 +171,7 @@ class NomaRadioMapVecEnv(VectorEnv):
         :param name: one of :attr:`REWARD_PHASES`
         :param indices: the missions (None: all)
         """
-        weights = rewards.phase_weights(name)
-        rows = self._rows(indices)
-        for component, weight in weights.items():
-            self._weights[component][rows] = weight
-        for i in rows:
-            self.reward_phases[i] = name
+        self.core.set_reward_phase(name, self._rows(indices))
 
     def reward_weights(self, phase: str | None = None) -> dict[str, float]:
         """
@@ -204,7 +179,7 @@ class NomaRadioMapVecEnv(VectorEnv):
 
         :param phase: a reward phase; None: mission 0's current one
         """
-        return rewards.phase_weights(self.reward_phases[0] if phase is None else phase)
+        return rewards.phase_weights(self.core.reward_phases[0] if phase is None else phase)
 
     def mission(self, index: int) -> MissionView:
         """One mission as a single env (:class:`MissionView`)."""
@@ -230,6 +205,31 @@ class NomaRadioMapVecEnv(VectorEnv):
         return [int(i) for i in indices]
 
     # --- the batched engine (also driven by the SB3 face) ----------------------------------------
+    @property
+    def positions(self) -> np.ndarray:
+        """Robot positions of every mission, (N, U, 2) (read-only view of the engine's state)."""
+        return self.core.positions
+
+    @property
+    def destinations(self) -> np.ndarray:
+        """Destinations of every mission, (N, U, 2)."""
+        return self.core.destinations
+
+    @property
+    def arrived(self) -> np.ndarray:
+        """Arrived flags of every mission, (N, U)."""
+        return self.core.arrived
+
+    @property
+    def step_counts(self) -> np.ndarray:
+        """Steps since each mission's last reset, (N,)."""
+        return self.core.step_counts
+
+    @property
+    def np_randoms(self) -> list[np.random.Generator]:
+        """Each mission's generator."""
+        return self.core.np_randoms
+
     def reset_missions(
         self, rows: np.ndarray, seeds: list[int | None] | None = None, options: dict | list[dict | None] | None = None
     ) -> None:
@@ -240,132 +240,28 @@ class NomaRadioMapVecEnv(VectorEnv):
         :param seeds: a seed per row (None entries keep the generator going)
         :param options: the single env's reset options, for every row or one per row
         """
-        env = self.template
-        for k, i in enumerate(rows):
-            seed = None if seeds is None else seeds[k]
-            if seed is not None:
-                self.np_randoms[i] = seeding.np_random(seed)[0]
-            row_options = options[k] if isinstance(options, list) else options
-            starts, destinations = env._draw_mission(row_options, self.np_randoms[i])
-            self.positions[i], self.destinations[i] = starts, destinations
-        self.arrived[rows] = False
-        self.step_counts[rows] = 0
-        self._arrival_step[rows] = env.max_steps
-        self._outage_steps[rows] = 0
-        if env.inducing == "geodesic":
-            if self._distance_maps.shape[-1] == 0:
-                self._distance_maps = np.zeros((self.num_envs, self.n_robots, env.scenario.room.nx * env.scenario.room.ny))
-            for i in rows:
-                self._distance_maps[i] = np.stack([env.radio_map.distance_field(d).ravel() for d in self.destinations[i]])
-        self._channel(rows, self.positions[rows])
+        self.core.reset(rows, seeds, options)
 
-    def step_missions(self, actions: np.ndarray, rows: np.ndarray | slice) -> BatchStep:
+    def step_missions(self, actions: np.ndarray, rows: np.ndarray | slice) -> MissionStep:
         """
-        One step of some missions: the stages of :meth:`NomaRadioMapEnv.step` over (rows, U).
+        One step of some missions (:meth:`noma_radiomap.core.MissionCore.step`).
 
         :param actions: actions of the stepped rows, (len(rows), 3U) (:func:`~noma_radiomap.actions.check_actions`:
             a wrong shape or a non-finite component raises a ValueError before anything changes)
         :param rows: the missions to step (a slice for all)
         :return: the step's outcome
+        :raises ResetNeeded: a stepped mission was never reset
         """
-        env = self.template
-        row_indices = self._all_rows[rows]
-        action = check_actions(actions, row_indices, self.n_robots)
-        active = ~self.arrived[rows]
-        positions, at_goal = env._motion.move_batch(self.positions[rows], action[..., :2], self.destinations[rows], active)
-        self.positions[rows] = positions
-        arriving = at_goal & active
-        gain, gain_db, interference = self._channel(rows, positions)
-        radio = env.scenario.radio
-        power = allocate_power(np.where(active, action[..., 2], -1.0), env._max_power_w)
-        result = downlink(power, gain, interference, radio.bandwidth_per_robot_hz, env._noise_w_per_hz, env.multiple_access)
-        outage = in_outage(result.rate_bps, radio.qos_rate_bps) & active
-        components = rewards.reward_components(
-            active, arriving, outage, self._distances(rows), env._d_max, env._reward_constants
-        )
-        # A weight per row (the phase may differ between missions), summed as the single env sums its floats
-        reward = rewards.weighted_reward(components, self._weight_columns(rows))
-        terminated, truncated = _record_step(
-            row_indices,
-            arriving,
-            outage,
-            self.arrived,
-            self.step_counts,
-            self._arrival_step,
-            self._outage_steps,
-            self.max_episode_steps,
-        )
-        return BatchStep(
-            rows=row_indices,
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            components=components,
-            power_w=power,
-            rate_bps=result.rate_bps,
-            sinr_db=result.sinr_db,
-            decoding_order=result.decoding_order,
-            outage=outage,
-            gain_db=gain_db,
-        )
-
-    def _channel(self, rows: np.ndarray | slice, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The channel of some missions at their positions: the linear AP gain, the same in dB (also kept for the
-        observation) and the interference power, (rows, U) each."""
-        env = self.template
-        gains = env._gain_table[env.scenario.room.flat_cell_index(positions)]  # (rows, U, transmitters)
-        if env.channel == "rayleigh" and len(gains):
-            # One draw per mission from its own generator: the single env's draws, in its order
-            fading = np.stack([rayleigh_fading(self.np_randoms[i], gains.shape[1:]) for i in self._all_rows[rows]])
-            gains = faded_gain(gains, fading)
-        gain = gains[..., 0]
-        gain_db = linear_to_db(gain)
-        self._gain_db[rows] = gain_db
-        return gain, gain_db, interference_power(gains[..., 1:], env._interferer_power_w)
-
-    def _weight_columns(self, rows: np.ndarray | slice) -> dict[str, np.ndarray]:
-        """The weight of each reward component for the stepped rows."""
-        if isinstance(rows, slice) and rows == slice(None):
-            return self._weights
-        return {name: weights[rows] for name, weights in self._weights.items()}
-
-    def _distances(self, rows: np.ndarray | slice) -> np.ndarray:
-        env = self.template
-        if env.inducing == "euclidean":
-            return geometry.distance(self.positions[rows], self.destinations[rows])
-        cells = env.scenario.room.flat_cell_index(self.positions[rows])
-        maps = self._distance_maps[rows]
-        return np.take_along_axis(maps, cells[..., None], axis=-1)[..., 0]
+        self.core.check_reset(rows)
+        return self.core.step(check_actions(actions, self._rows_all[rows], self.n_robots), rows)
 
     def observations(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """The observations of some missions, (rows, 6U) float32 (``observation="goal"``: (rows, 9U))."""
-        env = self.template
-        paper = mission_observation(
-            self.positions[rows],
-            self.destinations[rows],
-            self._gain_db[rows],
-            self.arrived[rows],
-            env._room_size,
-            env.GAIN_DB_RANGE,
-        )
-        if self._goal is None:
-            return paper
-        goal = goal_features(self.positions[rows], self.destinations[rows], self.arrived[rows], self._goal.distance_scale)
-        return np.concatenate([paper, goal], axis=-1).astype(np.float32)
+        """The observations of some missions, float32 (rows, values per robot x U)."""
+        return self.core.observations(rows)
 
     def episode_summaries(self, rows: np.ndarray) -> dict[str, np.ndarray]:
         """:meth:`NomaRadioMapEnv.episode_summary` of some missions, as arrays over the rows."""
-        mission = self.template.scenario.mission
-        arrived = self.arrived[rows]
-        mission_time = np.where(arrived, self._arrival_step[rows], self.max_steps).astype(np.int64)
-        outage_steps = self._outage_steps[rows].copy()
-        mqi = rewards.mission_quality_indicator(mission.t_total, mission_time, outage_steps, mission.outage_penalty)
-        return {
-            "is_success": arrived.all(axis=-1),
-            "mqi": np.asarray(mqi, dtype=np.float64),
-            "mission_time": mission_time,
-            "outage_steps": outage_steps,
-        }
+        return self.core.episode_summaries(rows)
 
     # --- Gymnasium VectorEnv API -----------------------------------------------------------------
     def reset(
@@ -380,11 +276,12 @@ class NomaRadioMapVecEnv(VectorEnv):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed: expected {self.num_envs} seeds (one per mission), got {len(seed)}")
             seeds = [seed[i] for i in rows]
-        self.reset_missions(rows, seeds, options or None)
+        self.core.reset(rows, seeds, options or None)
         self._autoreset[rows] = False
-        return self.observations(), {}
+        return self.core.observations(), {}
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        self.core.check_reset()
         actions = np.asarray(actions)
         resetting = self._autoreset.copy()
         stepping = np.flatnonzero(~resetting) if resetting.any() else slice(None)
@@ -396,12 +293,12 @@ class NomaRadioMapVecEnv(VectorEnv):
         if not resetting.all():
             self._step_infos(self.step_missions(actions[stepping], stepping), reward, terminated, truncated, infos)
         if resetting.any():
-            self.reset_missions(np.flatnonzero(resetting))
+            self.core.reset(np.flatnonzero(resetting))
         self._autoreset = terminated | truncated
-        return self.observations(), reward, terminated, truncated, infos
+        return self.core.observations(), reward, terminated, truncated, infos
 
     def _step_infos(
-        self, result: BatchStep, reward: np.ndarray, terminated: np.ndarray, truncated: np.ndarray, infos: dict[str, Any]
+        self, result: MissionStep, reward: np.ndarray, terminated: np.ndarray, truncated: np.ndarray, infos: dict[str, Any]
     ) -> None:
         """Scatter a step's outcome into the (N,) arrays and Gymnasium's masked infos."""
         n, rows = self.num_envs, result.rows
@@ -410,62 +307,25 @@ class NomaRadioMapVecEnv(VectorEnv):
         mask[rows] = True
         components = {}
         for key, value in result.components.items():
-            components[key], components[f"_{key}"] = self._full(value, rows, mask), mask
+            components[key], components[f"_{key}"] = _full(value, rows, mask), mask
         infos["reward_components"] = components
         infos["_reward_components"] = mask
-        for key in ("rate_bps", "sinr_db", "outage", "power_w", "gain_db", "decoding_order"):
-            infos[key], infos[f"_{key}"] = self._full(getattr(result, key), rows, mask), mask
-        ended = rows[result.terminated | result.truncated]
-        if len(ended):
-            end_mask = np.zeros(n, dtype=bool)
-            end_mask[ended] = True
-            for key, value in self.episode_summaries(ended).items():
-                infos[key], infos[f"_{key}"] = self._full(value, ended, end_mask), end_mask
-
-    @staticmethod
-    def _full(values: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        if mask.all():
-            return values
-        full = np.zeros((len(mask), *np.shape(values)[1:]), dtype=np.asarray(values).dtype)
-        full[rows] = values
-        return full
+        for key in INFO_KEYS:
+            infos[key], infos[f"_{key}"] = _full(getattr(result, key), rows, mask), mask
+        for key in SUMMARY_KEYS:
+            infos[key], infos[f"_{key}"] = _full(result.summary[key], rows, mask), mask
 
     def close_extras(self, **kwargs: Any) -> None:
-        self.template.close()
+        pass
 
 
-@compiled
-def _record_step(
-    rows: np.ndarray,
-    arriving: np.ndarray,
-    outage: np.ndarray,
-    arrived: np.ndarray,
-    step_counts: np.ndarray,
-    arrival_step: np.ndarray,
-    outage_steps: np.ndarray,
-    max_episode_steps: int,
-) -> tuple[np.ndarray, np.ndarray]:
-    """
-    The bookkeeping of a step of the missions ``rows`` (the single env's, in one compiled loop): count the
-    step, record the arrivals (``arriving``, (rows, U)) and their step, add the outages; in place on the
-    (N, ...) state arrays. Returns whether each stepped mission terminated (all robots arrived) and
-    reached ``max_episode_steps``.
-    """
-    terminated = np.empty(len(rows), dtype=np.bool_)
-    truncated = np.empty(len(rows), dtype=np.bool_)
-    for k in range(len(rows)):
-        i = rows[k]
-        step_counts[i] += 1
-        all_arrived = True
-        for u in range(arrived.shape[1]):
-            if arriving[k, u]:
-                arrived[i, u] = True
-                arrival_step[i, u] = step_counts[i]
-            outage_steps[i, u] += outage[k, u]
-            all_arrived &= arrived[i, u]
-        terminated[k] = all_arrived
-        truncated[k] = step_counts[i] >= max_episode_steps
-    return terminated, truncated
+def _full(values: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``values`` of the rows ``rows`` scattered into an array over all missions (zeros elsewhere)."""
+    if mask.all():
+        return values
+    full = np.zeros((len(mask), *np.shape(values)[1:]), dtype=np.asarray(values).dtype)
+    full[rows] = values
+    return full
 
 
 def make_vec_env(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:

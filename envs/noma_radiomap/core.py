@@ -1,0 +1,472 @@
+"""The mission engine: N missions of one scenario stepped at once on (N, U) arrays (docs/ARCHITECTURE.md, env).
+
+:class:`MissionCore` is the one implementation of a mission step: motion, channel, power allocation and SIC,
+rewards, bookkeeping, observation, episode summary and the ``info`` keys. The single env
+(:class:`noma_radiomap.NomaRadioMapEnv`) drives it with N = 1, the vector env
+(:class:`noma_radiomap.vector.NomaRadioMapVecEnv`) with N; neither keeps mission state of its own. Each mission
+has its own random generator (the starts and destinations of its resets, its Rayleigh fading), so mission ``i``
+seeded ``s`` makes the transitions of a single env seeded ``s``.
+"""
+
+import os
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from gymnasium.error import ResetNeeded
+from gymnasium.utils import seeding
+
+from noma_radiomap import geometry, rewards
+from noma_radiomap.compiled import compiled
+from noma_radiomap.downlink import MULTIPLE_ACCESS, allocate_rows, downlink, in_outage
+from noma_radiomap.motion import GridMotion
+from noma_radiomap.observations import DEFAULT_OBSERVATION, GAIN_DB_RANGE, Observer, check_observation
+from noma_radiomap.propagation import dbm_to_watt, linear_to_db, rayleigh_fading
+from noma_radiomap.radiomap import RadioMap
+from noma_radiomap.sampling import MissionSampler
+from noma_radiomap.scenario import Scenario, load_scenario
+
+CHANNELS: tuple[str, ...] = ("radio_map", "rayleigh")
+INDUCING: tuple[str, ...] = ("euclidean", "geodesic")
+#: The tasks: ``"missions"`` draws each robot's destination from its scenario list every episode; ``"paper"``
+#: is the paper's task (docs/MODEL.md, the paper's task): each robot's first listed destination, fixed, the
+#: paper's state as the default observation and episodes of :data:`PAPER_MAX_STEPS` steps.
+TASKS: tuple[str, ...] = ("missions", "paper")
+#: The paper's task: episode cap and MQI budget ``T_total`` (paper Sec. V: "T_total = 1000 is regarded as the
+#: maximum score"; the paper gives no other episode length, so a mission may last as long as its budget).
+PAPER_MAX_STEPS = 1000
+#: The per-robot arrays of every step's ``info`` (arrays of length U in scenario order).
+INFO_KEYS: tuple[str, ...] = ("rate_bps", "sinr_db", "outage", "power_w", "gain_db", "decoding_order")
+#: The episode summary in every ``info``, as of the step (:meth:`MissionCore.episode_summaries`): the envs cannot see
+#: where an outer ``TimeLimit`` ends an episode, and its last ``info`` must have it.
+SUMMARY_KEYS: tuple[str, ...] = ("is_success", "mqi", "mission_time", "outage_steps")
+RESET_FIRST = "call reset() first"
+#: The summary values that are one Python scalar per mission in an ``info``, and their type
+_SCALAR_SUMMARIES: dict[str, type] = {"is_success": bool, "mqi": float}
+_INFO_ROW_KEYS = ("reward_components", *INFO_KEYS, *SUMMARY_KEYS)
+_ALL = slice(None)
+
+
+@dataclass
+class MissionStep:
+    """The outcome of one step of the stepped missions (arrays over the stepped rows)."""
+
+    rows: np.ndarray
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    components: dict[str, np.ndarray]
+    power_w: np.ndarray
+    rate_bps: np.ndarray
+    sinr_db: np.ndarray
+    decoding_order: np.ndarray
+    outage: np.ndarray
+    gain_db: np.ndarray
+    summary: dict[str, np.ndarray]
+    """The episode summaries as of the step (:meth:`MissionCore.episode_summaries`)."""
+
+    def info(self, k: int) -> dict[str, Any]:
+        """The ``info`` of the ``k``-th stepped mission: ``reward_components``, :data:`INFO_KEYS` and the episode
+        summary as of the step (:data:`SUMMARY_KEYS`)."""
+        info: dict[str, Any] = {"reward_components": {name: float(value[k]) for name, value in self.components.items()}}
+        for key in INFO_KEYS:
+            info[key] = getattr(self, key)[k]
+        info.update(summary_row(self.summary, k))
+        return info
+
+    def infos(self) -> list[dict[str, Any]]:
+        """:meth:`info` of every stepped mission, in row order (built column by column: faster for many missions)."""
+        names = tuple(self.components)
+        columns = [
+            [
+                dict(zip(names, values, strict=True))
+                for values in zip(*(value.tolist() for value in self.components.values()), strict=True)
+            ]
+        ]
+        columns += [list(getattr(self, key)) for key in INFO_KEYS]
+        columns += [
+            self.summary[key].tolist() if key in _SCALAR_SUMMARIES else list(self.summary[key]) for key in SUMMARY_KEYS
+        ]
+        return [dict(zip(_INFO_ROW_KEYS, row, strict=True)) for row in zip(*columns, strict=True)]
+
+
+def summary_row(summaries: dict[str, np.ndarray], j: int) -> dict[str, Any]:
+    """The episode summary of the ``j``-th row of :meth:`MissionCore.episode_summaries`, as one mission's ``info``
+    holds it: ``is_success`` a bool, ``mqi`` a float, per-robot arrays for the others."""
+    return {key: _SCALAR_SUMMARIES.get(key, _same)(summaries[key][j]) for key in SUMMARY_KEYS}
+
+
+def _same(value: Any) -> Any:
+    return value
+
+
+def load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
+    """A scenario from a built-in name, a YAML path or a :class:`Scenario`."""
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, str | os.PathLike):
+        return load_scenario(scenario)
+    raise ValueError(f"scenario must be a scenario name, a YAML path or a Scenario, got {scenario!r}")
+
+
+class MissionCore:
+    """
+    N missions of one scenario on (N, U) arrays. The arguments are those of :class:`~noma_radiomap.NomaRadioMapEnv`.
+
+    State (read it, do not write it): ``positions`` and ``destinations`` (N, U, 2), ``arrived`` (N, U),
+    ``step_counts`` (N,), ``arrival_steps`` and ``outage_steps`` (N, U), ``gain_db`` (N, U), ``np_randoms`` and
+    ``reward_phases`` (one per mission). Stepping or summarising a mission before its first reset raises
+    Gymnasium's ``ResetNeeded``.
+
+    :param num_missions: N
+    :param max_episode_steps: the step at which :meth:`step` reports truncation (None: ``max_steps``, at most that)
+    """
+
+    def __init__(
+        self,
+        num_missions: int,
+        scenario: str | os.PathLike[str] | Scenario = "mall",
+        multiple_access: str = "noma",
+        channel: str = "radio_map",
+        reward_phase: str = "destination",
+        inducing: str = "euclidean",
+        observation: str | None = None,
+        task: str = "missions",
+        max_episode_steps: int | None = None,
+    ) -> None:
+        for name, value, allowed in (
+            ("multiple_access", multiple_access, MULTIPLE_ACCESS),
+            ("channel", channel, CHANNELS),
+            ("reward_phase", reward_phase, rewards.REWARD_PHASES),
+            ("inducing", inducing, INDUCING),
+            ("task", task, TASKS),
+        ):
+            if value not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+        if observation is None:
+            observation = "paper" if task == "paper" else DEFAULT_OBSERVATION
+        check_observation(observation)
+        sc = load(scenario)
+        # The map does not depend on the missions: the scenario as loaded hits the map cache
+        self.radio_map = RadioMap.for_scenario(sc)
+        if task == "paper":
+            sc = replace(sc, mission=replace(sc.mission, max_steps=PAPER_MAX_STEPS, t_total=float(PAPER_MAX_STEPS)))
+        self.scenario = sc
+        self.multiple_access, self.channel, self.inducing, self.task = multiple_access, channel, inducing, task
+        self.observation = observation
+        self.n_robots = sc.n_robots
+        self.max_steps = sc.mission.max_steps
+        limit = self.max_steps if max_episode_steps is None else int(max_episode_steps)
+        if limit < 1:
+            raise ValueError(f"max_episode_steps must be >= 1, got {max_episode_steps!r}")
+        self.max_episode_steps = min(limit, self.max_steps)
+        self.motion = GridMotion(
+            self.radio_map.blocked,
+            sc.room,
+            max_step=sc.robot.v_max * sc.mission.time_step,
+            arrival_radius=sc.robot.arrival_radius,
+        )
+        self.observe = Observer(observation, (sc.room.width, sc.room.depth), GAIN_DB_RANGE)
+        # One row per cell (flat index ix * ny + iy), one column per transmitter (AP first): a single gather per
+        # step. The radio-map channel has the expected fading folded in; the Rayleigh channel draws it.
+        gains = self.radio_map.gain if channel == "radio_map" else self.radio_map.path_gain
+        table = np.stack([gains[name] for name in sc.transmitter_names])
+        self._gain_table = table.reshape(len(table), -1).T.copy()
+        self._interferer_power_w = dbm_to_watt(np.array([i.power_dbm for i in sc.interferers], dtype=np.float64))
+        self.max_power_w = float(dbm_to_watt(sc.ap.max_power_dbm))
+        self._noise_w_per_hz = float(dbm_to_watt(sc.radio.noise_dbm_per_hz))
+        mission = sc.mission
+        self.reward_constants = rewards.RewardConstants(
+            time_cost=mission.time_cost,
+            outage_penalty=mission.outage_penalty,
+            arrival_reward=mission.arrival_reward,
+            success_reward=mission.success_reward,
+        )
+        self._d_max = sc.room.d_max
+        #: Draws the starts and destinations of a reset (:class:`noma_radiomap.sampling.MissionSampler`)
+        self.sampler = MissionSampler(sc, self.radio_map, self.motion, fixed_destinations=task == "paper")
+
+        n, u = int(num_missions), self.n_robots
+        self.num_missions = n
+        self.np_randoms: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(n)]
+        self.reward_phases = [reward_phase] * n
+        rewards.phase_weights(reward_phase)  # a ValueError naming an unknown phase
+        # The weight of each reward component (rows, in the order of REWARD_COMPONENTS) per mission (column)
+        self._weights = np.zeros((len(rewards.REWARD_COMPONENTS), n))
+        self.set_reward_phase(reward_phase, list(range(n)))
+        self.positions = np.zeros((n, u, 2))
+        self.destinations = np.zeros((n, u, 2))
+        self.arrived = np.zeros((n, u), dtype=bool)
+        self.step_counts = np.zeros(n, dtype=np.int64)
+        self.arrival_steps = np.full((n, u), self.max_steps, dtype=np.int64)
+        self.outage_steps = np.zeros((n, u), dtype=np.int64)
+        self.gain_db = np.zeros((n, u))
+        self._distance_maps = np.zeros((n, u, 0))
+        self._was_reset = np.zeros(n, dtype=bool)
+        self._all_reset = False
+        self._all_rows = np.arange(n)
+
+    # --- reward phases -----------------------------------------------------------------------------
+    def set_reward_phase(self, name: str, rows: list[int]) -> None:
+        """
+        Switch the reward phase of some missions (takes effect from their next step).
+
+        :param name: one of :data:`noma_radiomap.rewards.REWARD_PHASES`
+        :param rows: the missions
+        """
+        weights = rewards.phase_weights(name)
+        for k, component in enumerate(rewards.REWARD_COMPONENTS):
+            self._weights[k, rows] = weights[component]
+        for i in rows:
+            self.reward_phases[i] = name
+
+    # --- resets ------------------------------------------------------------------------------------
+    def reset(
+        self,
+        rows: np.ndarray,
+        seeds: list[int | None] | None = None,
+        options: dict | list[dict | None] | None = None,
+        rngs: list[np.random.Generator] | None = None,
+    ) -> None:
+        """
+        Reset some missions: draw (or take from ``options``) their starts and destinations.
+
+        :param rows: the missions to reset
+        :param seeds: a seed per row (None entries keep the generator going)
+        :param options: the reset options (``starts``, ``destinations``), for every row or one per row
+        :param rngs: a generator per row to use from now on (the single env passes its ``np_random``)
+        """
+        for k, i in enumerate(rows):
+            if rngs is not None:
+                self.np_randoms[i] = rngs[k]
+            elif seeds is not None and seeds[k] is not None:
+                self.np_randoms[i] = seeding.np_random(seeds[k])[0]
+            row_options = options[k] if isinstance(options, list) else options
+            self.positions[i], self.destinations[i] = self.sampler.draw(row_options, self.np_randoms[i])
+        self.arrived[rows] = False
+        self.step_counts[rows] = 0
+        self.arrival_steps[rows] = self.max_steps
+        self.outage_steps[rows] = 0
+        if self.inducing == "geodesic":
+            if self._distance_maps.shape[-1] == 0:
+                cells = self.scenario.room.nx * self.scenario.room.ny
+                self._distance_maps = np.zeros((self.num_missions, self.n_robots, cells))
+            for i in rows:
+                self._distance_maps[i] = np.stack([self.radio_map.distance_field(d).ravel() for d in self.destinations[i]])
+        self._channel(rows, self.positions[rows])
+        self._was_reset[rows] = True
+        self._all_reset = bool(self._was_reset.all())
+
+    def check_reset(self, rows: np.ndarray | slice = slice(None)) -> None:
+        """:raises ResetNeeded: a mission of ``rows`` has not been reset yet"""
+        if not self._all_reset and not self._was_reset[rows].all():
+            raise ResetNeeded(f"the mission has not been reset: {RESET_FIRST}")
+
+    # --- one step ----------------------------------------------------------------------------------
+    def step(self, action: np.ndarray, rows: np.ndarray | slice) -> MissionStep:
+        """
+        One step of some missions.
+
+        :param action: the checked actions of the stepped rows, float64 (len(rows), U, 3)
+            (:func:`noma_radiomap.actions.check_action` / :func:`~noma_radiomap.actions.check_actions`)
+        :param rows: the missions to step (a slice for all)
+        :return: the step's outcome
+        """
+        self.check_reset(rows)
+        row_indices = self._all_rows[rows]
+        # Robots that arrived before this step are inactive: no motion, no power, no time cost, no outage.
+        active = ~self.arrived[rows]
+        positions, at_goal = self.motion.move_batch(self.positions[rows], action[..., :2], self.destinations[rows], active)
+        self.positions[rows] = positions
+        arriving = at_goal & active
+        gain, gain_db, interference = self._channel(rows, positions)
+        radio = self.scenario.radio
+        power = allocate_rows(action[..., 2], active, self.max_power_w)
+        result = downlink(power, gain, interference, radio.bandwidth_per_robot_hz, self._noise_w_per_hz, self.multiple_access)
+        outage = in_outage(result.rate_bps, radio.qos_rate_bps) & active
+        values = rewards.component_values(active, arriving, outage, self._distances(rows), self._d_max, self.reward_constants)
+        # A weight per row (the phase may differ between missions)
+        reward = rewards.weighted_rows(values, self._weights[:, rows])
+        components = dict(zip(rewards.REWARD_COMPONENTS, values, strict=True))
+        terminated, truncated = _record_step(
+            row_indices,
+            arriving,
+            outage,
+            self.arrived,
+            self.step_counts,
+            self.arrival_steps,
+            self.outage_steps,
+            self.max_episode_steps,
+        )
+        return MissionStep(
+            rows=row_indices,
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            components=components,
+            power_w=power,
+            rate_bps=result.rate_bps,
+            sinr_db=result.sinr_db,
+            decoding_order=result.decoding_order,
+            outage=outage,
+            gain_db=gain_db,
+            summary=self.episode_summaries(rows),
+        )
+
+    def _channel(self, rows: np.ndarray | slice, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The channel of some missions at their positions: the linear AP gain, the same in dB (also kept for the
+        observation) and the interference power, (rows, U) each."""
+        room = self.scenario.room
+        if self.channel == "rayleigh" and len(positions):
+            # One draw per mission from its own generator, in the order of a single env's draws
+            shape = (self.n_robots, self._gain_table.shape[1])
+            fading = np.stack([rayleigh_fading(self.np_randoms[i], shape) for i in self._all_rows[rows]])
+        else:
+            fading = _NO_FADING
+        gain, interference = _link_rows(
+            positions, self._gain_table, room.resolution, room.nx, room.ny, fading, self._interferer_power_w
+        )
+        gain_db = linear_to_db(gain)
+        self.gain_db[rows] = gain_db
+        return gain, gain_db, interference
+
+    def _distances(self, rows: np.ndarray | slice) -> np.ndarray:
+        """Distance of each robot to its destination: Euclidean, or geodesic on the grid (``inducing``)."""
+        if self.inducing == "euclidean":
+            return geometry.distance(self.positions[rows], self.destinations[rows])
+        cells = self.scenario.room.flat_cell_index(self.positions[rows])
+        return np.take_along_axis(self._distance_maps[rows], cells[..., None], axis=-1)[..., 0]
+
+    # --- what the envs report ----------------------------------------------------------------------
+    def observations(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """The observations of some missions in the core's layout, float32 (rows, values per robot x U)."""
+        return self.observe.rows(self.positions[rows], self.destinations[rows], self.gain_db[rows], self.arrived[rows])
+
+    def episode_summaries(self, rows: np.ndarray | slice) -> dict[str, np.ndarray]:
+        """
+        The end-of-episode figures (paper Eq. (13)-(14)) of some missions, as of their current step, arrays over
+        the rows: ``is_success`` (all arrived), ``mqi``, ``mission_time`` (per robot, ``T_u``: steps until arrival,
+        ``max_steps`` if not arrived) and ``outage_steps`` (per robot).
+        """
+        self.check_reset(rows)
+        mission = self.scenario.mission
+        arrived = self.arrived[rows]
+        if self.n_robots > _SEQUENTIAL_SUM_MAX:  # numpy's sum adds 8 or more terms pairwise: its bits
+            mission_time = np.where(arrived, self.arrival_steps[rows], self.max_steps).astype(np.int64)
+            outage_steps = self.outage_steps[rows].copy()
+            mqi = rewards.mission_quality_indicator(mission.t_total, mission_time, outage_steps, mission.outage_penalty)
+            return {
+                "is_success": arrived.all(axis=-1),
+                "mqi": np.asarray(mqi, dtype=np.float64),
+                "mission_time": mission_time,
+                "outage_steps": outage_steps,
+            }
+        success, mqi, mission_time, outage_steps = _summary_rows(
+            arrived, self.arrival_steps[rows], self.outage_steps[rows], self.max_steps, mission.t_total, mission.outage_penalty
+        )
+        return {"is_success": success, "mqi": mqi, "mission_time": mission_time, "outage_steps": outage_steps}
+
+
+_NO_FADING = np.zeros((0, 0, 0))
+#: Up to this many robots numpy's ``sum`` adds left to right, as :func:`_summary_rows` does; beyond, pairwise.
+_SEQUENTIAL_SUM_MAX = 7
+
+
+@compiled
+def _summary_rows(
+    arrived: np.ndarray,
+    arrival_steps: np.ndarray,
+    outage_steps: np.ndarray,
+    max_steps: int,
+    t_total: float,
+    outage_penalty: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """
+    The episode summaries of (M, U) robots, compiled: all arrived, the MQI
+    (:func:`~noma_radiomap.rewards.mission_quality_indicator`), the mission times and a copy of the outage counts.
+    The MQI's sum over the robots runs left to right, like every sum over robots of the physics.
+    """
+    n_rows, n_robots = arrived.shape
+    success = np.empty(n_rows, dtype=np.bool_)
+    mqi = np.empty(n_rows)
+    mission_time = np.empty((n_rows, n_robots), dtype=np.int64)
+    outage = np.empty((n_rows, n_robots), dtype=np.int64)
+    for row in range(n_rows):
+        all_arrived, total = True, 0.0
+        for u in range(n_robots):
+            mission_time[row, u] = arrival_steps[row, u] if arrived[row, u] else max_steps
+            outage[row, u] = outage_steps[row, u]
+            all_arrived &= arrived[row, u]
+            term = mission_time[row, u] + outage_penalty * outage[row, u]
+            total = term if u == 0 else total + term
+        success[row] = all_arrived
+        mqi[row] = t_total - total
+    return success, mqi, mission_time, outage
+
+
+@compiled
+def _link_rows(
+    positions: np.ndarray,
+    table: np.ndarray,
+    resolution: float,
+    nx: int,
+    ny: int,
+    fading: np.ndarray,
+    interferer_power_w: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """
+    The links of (M, U) robots at ``positions`` (M, U, 2), compiled: each robot's row of the per-cell gain table
+    (AP first, then the interferers), times its fading powers (M, U, transmitters) unless ``fading`` is empty
+    (:func:`~noma_radiomap.propagation.faded_gain`); returns the AP gain and the interference
+    ``sum_i P_i g_i`` summed left to right (:func:`~noma_radiomap.propagation.interference_power`), (M, U) each.
+    """
+    n_rows, n_robots = positions.shape[0], positions.shape[1]
+    faded = fading.shape[0] > 0
+    gain = np.empty((n_rows, n_robots))
+    interference = np.zeros((n_rows, n_robots))
+    for row in range(n_rows):
+        for u in range(n_robots):
+            ix = geometry.axis_cell(positions[row, u, 0], resolution, nx)
+            iy = geometry.axis_cell(positions[row, u, 1], resolution, ny)
+            cell = ix * ny + iy
+            g = table[cell, 0] * fading[row, u, 0] if faded else table[cell, 0]
+            gain[row, u] = g
+            total = 0.0
+            for i in range(len(interferer_power_w)):
+                g_i = table[cell, i + 1] * fading[row, u, i + 1] if faded else table[cell, i + 1]
+                total = g_i * interferer_power_w[i] if i == 0 else total + g_i * interferer_power_w[i]
+            interference[row, u] = total
+    return gain, interference
+
+
+@compiled
+def _record_step(
+    rows: np.ndarray,
+    arriving: np.ndarray,
+    outage: np.ndarray,
+    arrived: np.ndarray,
+    step_counts: np.ndarray,
+    arrival_steps: np.ndarray,
+    outage_steps: np.ndarray,
+    max_episode_steps: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """
+    The bookkeeping of a step of the missions ``rows``, in place on the (N, ...) state arrays: count the step,
+    record the arrivals (``arriving``, (rows, U)) and their step, add the outages. Returns whether each stepped
+    mission terminated (all robots arrived) and reached ``max_episode_steps``.
+    """
+    terminated = np.empty(len(rows), dtype=np.bool_)
+    truncated = np.empty(len(rows), dtype=np.bool_)
+    for k in range(len(rows)):
+        i = rows[k]
+        step_counts[i] += 1
+        all_arrived = True
+        for u in range(arrived.shape[1]):
+            if arriving[k, u]:
+                arrived[i, u] = True
+                arrival_steps[i, u] = step_counts[i]
+            outage_steps[i, u] += outage[k, u]
+            all_arrived &= arrived[i, u]
+        terminated[k] = all_arrived
+        truncated[k] = step_counts[i] >= max_episode_steps
+    return terminated, truncated

@@ -1,0 +1,126 @@
+"""The missions of a reset: each robot's start and destination, drawn from its scenario or given in the reset options
+(docs/MODEL.md, the paper's task; the env's Starting State)."""
+
+from typing import Any
+
+import numpy as np
+
+from noma_radiomap import geometry
+from noma_radiomap.motion import GridMotion
+from noma_radiomap.radiomap import RadioMap
+from noma_radiomap.scenario import Scenario
+
+__all__ = ["MissionSampler"]
+
+
+class MissionSampler:
+    """
+    Draws missions: per robot one of its scenario destinations (the first only with ``fixed_destinations``) and a
+    free cell centre of its start region farther than ``arrival_radius`` from it, or the points of the reset
+    options, checked (free, reachable, not already arrived).
+
+    :param scenario: the scenario
+    :param radio_map: its radio map (the free start cells)
+    :param motion: its motion rules (which points are free)
+    :param fixed_destinations: each robot's first listed destination only (the paper's task)
+    """
+
+    def __init__(self, scenario: Scenario, radio_map: RadioMap, motion: GridMotion, fixed_destinations: bool = False) -> None:
+        self.scenario, self.radio_map, self.motion = scenario, radio_map, motion
+        self.fixed_destinations = fixed_destinations
+        self.n_robots = scenario.n_robots
+        self._components = geometry.free_components(radio_map.blocked)
+        #: Per robot, its destinations and the free start cells not already at each of them
+        self.choices = self._choices()
+
+    def _choices(self) -> list[list[tuple[np.ndarray, np.ndarray]]]:
+        """Per robot, its destinations (the first only in the paper's task) and the free start cells not already
+        at each of them."""
+        sc, radio_map = self.scenario, self.radio_map
+        missions = []
+        for u, robot in enumerate(sc.robots):
+            centres = (radio_map.start_cells(u) + 0.5) * sc.room.resolution
+            choices = []
+            for destination in robot.destinations[:1] if self.fixed_destinations else robot.destinations:
+                goal = np.asarray(destination, dtype=np.float64)
+                far = np.hypot(*(centres - goal).T) > sc.robot.arrival_radius
+                if not far.any():
+                    raise ValueError(
+                        f"robots[{u}].start: every free cell of {list(robot.start)} is within arrival_radius of "
+                        f"destination {list(destination)}"
+                    )
+                choices.append((goal, centres[far]))
+            missions.append(choices)
+        return missions
+
+    # --- missions ----------------------------------------------------------------------------------
+    def draw(self, options: dict[str, Any] | None, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Starts and destinations (U, 2) each: drawn from the scenario with ``rng``, or given in the reset options.
+
+        :param options: the reset options
+        :param rng: the mission's generator
+        """
+        options = {} if options is None else dict(options)
+        unknown = set(options) - {"starts", "destinations"}
+        if unknown:
+            raise ValueError(f"options: unknown keys {sorted(unknown)}, expected 'starts' and/or 'destinations'")
+        destinations = self._option_points(options, "destinations")
+        starts = self._option_points(options, "starts")
+        if destinations is None:
+            destinations = np.empty((self.n_robots, 2))
+            for u, choices in enumerate(self.choices):
+                destinations[u] = choices[rng.integers(len(choices))][0]
+        if starts is None:
+            starts = np.empty((self.n_robots, 2))
+            for u, choices in enumerate(self.choices):
+                candidates = self._start_candidates(u, destinations[u], choices)
+                starts[u] = candidates[rng.integers(len(candidates))]
+        self._check_mission(starts, destinations)
+        return starts, destinations
+
+    def _start_candidates(self, u: int, destination: np.ndarray, choices: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+        for goal, candidates in choices:
+            if np.array_equal(goal, destination):
+                return candidates
+        # A destination given through the options: any free start cell farther than arrival_radius.
+        all_cells = np.concatenate([c for _, c in choices])
+        far = np.hypot(*(all_cells - destination).T) > self.scenario.robot.arrival_radius
+        if not far.any():
+            raise ValueError(
+                f"options['destinations'][{u}]: {destination.tolist()} is within arrival_radius of every start cell"
+            )
+        return all_cells[far]
+
+    def _option_points(self, options: dict[str, Any], key: str) -> np.ndarray | None:
+        if key not in options or options[key] is None:
+            return None
+        try:
+            points = np.array(options[key], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"options[{key!r}]: expected {self.n_robots} points [x, y], got {options[key]!r}") from None
+        if points.shape != (self.n_robots, 2) or not np.isfinite(points).all():
+            raise ValueError(
+                f"options[{key!r}]: expected {self.n_robots} finite points [x, y] (shape ({self.n_robots}, 2)), "
+                f"got {options[key]!r}"
+            )
+        free = self.motion.is_free(points)
+        if not free.all():
+            u = int(np.flatnonzero(~free)[0])
+            raise ValueError(f"options[{key!r}][{u}]: {points[u].tolist()} is outside the room or in a blocked cell")
+        return points
+
+    def _check_mission(self, starts: np.ndarray, destinations: np.ndarray) -> None:
+        start_labels = self._components[self.scenario.room.cell_index(starts)]
+        goal_labels = self._components[self.scenario.room.cell_index(destinations)]
+        for u in range(self.n_robots):
+            if start_labels[u] != goal_labels[u]:
+                raise ValueError(
+                    f"options: destination {destinations[u].tolist()} of robot {u} is unreachable from its start "
+                    f"{starts[u].tolist()}"
+                )
+            if np.hypot(*(starts[u] - destinations[u])) <= self.scenario.robot.arrival_radius:
+                raise ValueError(
+                    f"options: start {starts[u].tolist()} of robot {u} is already within arrival_radius "
+                    f"({self.scenario.robot.arrival_radius} m) of its destination {destinations[u].tolist()}"
+                )
