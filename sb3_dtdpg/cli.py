@@ -40,7 +40,7 @@ __all__ = ["build_parser", "main"]
 # them against sb3_dtdpg.baselines and noma_radiomap.registration).
 _ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
 _PRESETS = ("paper", "tuned")
-_OBSERVATIONS = ("paper", "goal")
+_OBSERVATIONS = ("goal", "destinations", "paper")
 _DEFAULT_ENV_ID = "NomaRadioMap-v0"
 _PRESET_HELP = (
     "hyperparameter set. tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; "
@@ -54,9 +54,10 @@ _MODES = ("noma", "oma")
 #: Seeds go to numpy and torch, which take 0 <= seed < 2**32.
 _MAX_SEED = 2**32 - 1
 _OBSERVATION_HELP = (
-    "goal: the paper's state plus each robot's direction and distance to its destination (an extension, "
-    "docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget; the default everywhere); "
-    "paper: the paper's state only"
+    "goal: each robot's position, destination, channel gain and arrived flag plus its direction and distance to "
+    "its destination (an extension, docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget; "
+    "the default everywhere); destinations: the same without direction and distance; paper: the paper's state, "
+    "Eq. (24), position and gain only (for the paper's task, fixed destinations)"
 )
 
 

@@ -21,8 +21,6 @@ __all__ = ["CHECKED", "SETTINGS", "EnvSettingsMismatch", "check_settings", "infe
 SETTINGS: tuple[str, ...] = ("scenario", "observation", "multiple_access", "channel", "task")
 #: What must match for a model to be used on an env (the channel may differ: train on the map, test with fading).
 CHECKED: tuple[str, ...] = ("scenario", "observation", "multiple_access", "task")
-#: Observation values per robot of each layout (noma_radiomap's ``paper`` and ``goal``).
-_VALUES_PER_ROBOT = {"paper": 6, "goal": 9}
 
 
 class EnvSettingsMismatch(ValueError):
@@ -39,16 +37,17 @@ def _single_env(env: Any) -> Any:
 
 
 def _observation_of(env: Any) -> str | None:
+    """The layout an agent sees: the env's own, or ``goal`` behind a ``RelativeGoalObservation`` wrapper."""
     from noma_radiomap.wrappers import RelativeGoalObservation
 
     layer = env
     while layer is not None:
         if isinstance(layer, RelativeGoalObservation):
             return "goal"
-        if isinstance(getattr(layer, "observation", None), str):  # the batched envs say it themselves
+        if isinstance(getattr(layer, "observation", None), str):  # the envs and the batched envs say it themselves
             return layer.observation
         layer = getattr(layer, "env", None) or getattr(layer, "vec_env", None)
-    return "paper"
+    return None
 
 
 def settings_of(env: Any) -> dict[str, Any] | None:
@@ -61,10 +60,13 @@ def settings_of(env: Any) -> dict[str, Any] | None:
         return None
     single = _single_env(env)
     base = getattr(single, "vec_env", None) or getattr(single, "unwrapped", single)
-    base = getattr(base, "template", base)  # NomaRadioMapVecEnv keeps one single env for its settings
-    scenario = getattr(base, "scenario", None)
-    if scenario is None or not hasattr(base, "multiple_access"):
+    # the batched NomaRadioMapVecEnv keeps its settings in its mission core
+    base = next(
+        (c for c in (base, getattr(base, "core", None)) if hasattr(c, "scenario") and hasattr(c, "multiple_access")), None
+    )
+    if base is None:
         return None
+    scenario = base.scenario
     return {
         "scenario": getattr(scenario, "name", str(scenario)),
         "observation": _observation_of(single),
@@ -96,7 +98,9 @@ def infer_observation(n_values: int, n_robots: int) -> str | None:
     :param n_robots: robots of the scenario
     :return: the layout with that length, or None
     """
-    return next((name for name, per_robot in _VALUES_PER_ROBOT.items() if per_robot * n_robots == n_values), None)
+    from noma_radiomap.observations import OBSERVATIONS
+
+    return next((name for name, per_robot in OBSERVATIONS.items() if per_robot * n_robots == n_values), None)
 
 
 def _make_call(settings: dict[str, Any]) -> str:

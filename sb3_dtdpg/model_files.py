@@ -83,7 +83,7 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
             "observation": spec.get("observation", "paper"),
             "multiple_access": spec.get("multiple_access"),
             "channel": spec.get("channel"),
-            "task": None,
+            "task": spec.get("task"),
         }
         source = str(result_file)
     if settings is None:

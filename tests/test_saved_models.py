@@ -39,7 +39,7 @@ def test_settings_of_the_envs():
         "observation": "goal",
         "multiple_access": "oma",
         "channel": "radio_map",
-        "task": None,
+        "task": "missions",
     }
     assert settings_of(small_env(observation="paper"))["observation"] == "paper"
     vec = make_mission_vec_env("NomaRadioMap-v0", n_envs=2, seed=0, env_kwargs={"scenario": "small", "observation": "goal"})
@@ -139,4 +139,4 @@ def test_settings_of_a_model_without_a_record_come_from_its_run_or_its_observati
     bare = tmp_path / "bare.zip"
     DDPG("MlpPolicy", gym.make("NomaRadioMap-v0", observation="paper"), learning_starts=10).save(bare)
     saved = read_saved_model(bare, algo="ddpg")
-    assert saved.settings == {"observation": "paper"} and saved.source == "the observation length"  # 6 x 2 robots
+    assert saved.settings == {"observation": "paper"} and saved.source == "the observation length"  # 3 x 2 robots
