@@ -1,15 +1,24 @@
 """
 Training speed of DTDPG vs SB3's DDPG, measured side by side in one process.
 
-Both learn with the same network sizes, batch size, buffer size, learning starts and env, with an OU action noise
-(DTDPG: its default linearly decayed OU noise; DDPG: SB3's constant OU noise of the same initial scale), one
-gradient step per env step. DDPG runs twice: as SB3 builds it (default Adam), and with the fused Adam that DTDPG
-uses by default, which isolates the cost of the batch norm layers. After a warm-up, the models alternate
-``learn(--steps, reset_num_timesteps=False)`` chunks ``--repeats`` times, so that load changes on the machine hit
-all alike. Printed: the median steps/s (wall clock) of each, and the median of the per-repeat ratios
-DTDPG / baseline, from wall-clock and from process CPU time.
+All learn with the same hyperparameters (DTDPG's defaults: learning rate 1e-3, tau 0.005, gamma 0.95, 3-step
+returns; network sizes, batch size, buffer size and learning starts from the command line) on the same env, with an
+OU action noise (DTDPG: its default linearly decayed OU noise; DDPG: SB3's constant OU noise of the same initial
+scale), one gradient step per env step. Variants: SB3's DDPG as SB3 builds it (default Adam), with the fused
+Adam that DTDPG uses by default, and with the lean training step (``LeanDDPG``: SB3's DDPG bit for bit); DTDPG
+with its lean training step (the default) and with SB3's generic step (``lean=False``, the same numbers, bit for
+bit). After a warm-up, the models alternate
+``learn(--steps, reset_num_timesteps=False)`` chunks ``--repeats`` times (the order reversed every other round),
+so that load changes on the machine hit all alike. Printed: the median steps/s (wall clock) of each, and the
+median of the per-repeat ratios DTDPG / variant, from wall-clock and from process CPU time, and variant / SB3 DDPG
+(CPU time).
+
+The floor: copies of the same networks doing their forward passes, backward passes and fused Adam steps on one
+fixed batch (no env, no replay buffer, no target update, no logging), timed in the same rounds as the chunks:
+updates/s, what steps/s would be at one update per step if nothing else cost anything.
 
     python benchmarks/train_speed.py                      # Pendulum-v1, and NomaRadioMap-v0 if installed
+    python benchmarks/train_speed.py --net-arch 400 300   # the networks of the DDPG paper
     python benchmarks/train_speed.py --envs Pendulum-v1 --steps 1000 --repeats 9
     python benchmarks/train_speed.py --vec-envs 8          # DTDPG on 1 env vs the batched vector env of 8
 
@@ -19,15 +28,24 @@ transition), and with ``gradient_steps=1`` (one update per N transitions); steps
 """
 
 import argparse
+import copy
 import time
+from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3 import DDPG
 from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
+from torch.nn import functional as F
 
 from sb3_dtdpg import DTDPG
+from sb3_dtdpg.dtdpg.lean import LeanDDPG
+
+#: The model whose ratios to the others are printed, and the baseline of the bar.
+DTDPG_LEAN, BASELINE = "DTDPG", "SB3 DDPG"
+#: Hyperparameters shared by all models (DTDPG's defaults), besides those from the command line.
+SHARED = dict(learning_rate=1e-3, tau=0.005, gamma=0.95, n_steps=3)
 
 
 def _available(env_id: str) -> bool:
@@ -44,37 +62,100 @@ def _timed_learn(model: DDPG, steps: int) -> tuple[float, float]:
     return steps / (time.perf_counter() - wall), steps / (time.process_time() - cpu)
 
 
+def floor_update(model: DDPG, batch_size: int) -> Callable[[], None]:
+    """
+    The bare math of one DDPG update of a copy of ``model``'s networks: target forward passes, critic forward,
+    backward and fused Adam step, actor forward, backward and fused Adam step, on one fixed batch of its replay
+    buffer (no sampling, no target update, no logging, no env).
+
+    :param model: A DDPG/DTDPG model whose replay buffer holds at least ``batch_size`` transitions
+    :param batch_size: Minibatch size
+    :return: A function doing one update
+    """
+    data = model.replay_buffer.sample(batch_size)
+    discounts = data.discounts if data.discounts is not None else model.gamma
+    policy = copy.deepcopy(model.policy)
+    policy.set_training_mode(True)
+    actor, critic, actor_target, critic_target = policy.actor, policy.critic, policy.actor_target, policy.critic_target
+    actor_opt = th.optim.Adam(actor.parameters(), lr=1e-4, fused=True)
+    critic_opt = th.optim.Adam(critic.parameters(), lr=1e-4, fused=True)
+
+    def update() -> None:
+        with th.no_grad():
+            next_q = critic_target(data.next_observations, actor_target(data.next_observations))[0]
+            target = data.rewards + (1 - data.dones) * discounts * next_q
+        critic_opt.zero_grad()
+        F.mse_loss(critic(data.observations, data.actions)[0], target).backward()
+        critic_opt.step()
+        actor_opt.zero_grad()
+        (-critic.q1_forward(data.observations, actor(data.observations)).mean()).backward()
+        actor_opt.step()
+
+    for _ in range(10):
+        update()
+    return update
+
+
+def _timed_updates(update: Callable[[], None], n_updates: int) -> tuple[float, float]:
+    wall, cpu = time.perf_counter(), time.process_time()
+    for _ in range(n_updates):
+        update()
+    return n_updates / (time.perf_counter() - wall), n_updates / (time.process_time() - cpu)
+
+
 def benchmark(env_id: str, net_arch: list[int], batch_size: int, steps: int, repeats: int, seed: int) -> dict[str, dict]:
-    common = dict(batch_size=batch_size, buffer_size=50_000, learning_starts=100, learning_rate=1e-4, tau=0.002, seed=seed)
+    common = dict(batch_size=batch_size, buffer_size=50_000, learning_starts=100, seed=seed, **SHARED)
     dtdpg = DTDPG("MlpPolicy", env_id, policy_kwargs=dict(net_arch=net_arch), **common)
     n_actions = int(np.prod(dtdpg.action_space.shape))
     sigma = float(np.mean(dtdpg.action_noise.current_sigma))
 
-    def ddpg(**policy_kwargs) -> DDPG:
+    def ddpg(cls: type[DDPG] = DDPG, **policy_kwargs) -> DDPG:
         noise = OrnsteinUhlenbeckActionNoise(np.zeros(n_actions), sigma * np.ones(n_actions))
-        return DDPG("MlpPolicy", env_id, action_noise=noise, policy_kwargs=dict(net_arch=net_arch, **policy_kwargs), **common)
+        return cls("MlpPolicy", env_id, action_noise=noise, policy_kwargs=dict(net_arch=net_arch, **policy_kwargs), **common)
 
-    # DDPG as SB3 builds it (default Adam), and with the fused Adam that DTDPG uses by default
-    models = {"DDPG": ddpg(), "DDPG fused Adam": ddpg(optimizer_kwargs=dict(fused=True)), "DTDPG": dtdpg}
+    models = {
+        BASELINE: ddpg(),
+        "SB3 DDPG fused Adam": ddpg(optimizer_kwargs=dict(fused=True)),
+        "LeanDDPG": ddpg(LeanDDPG),  # SB3's DDPG (default Adam) with the lean step: the same weights bit for bit
+        "DTDPG lean=False": DTDPG("MlpPolicy", env_id, policy_kwargs=dict(net_arch=net_arch), lean=False, **common),
+        DTDPG_LEAN: dtdpg,
+    }
     for model in models.values():  # warm-up: fill past learning_starts, first gradient steps
         model.learn(max(300, steps // 4))
-    wall: dict[str, list[float]] = {name: [] for name in models}
-    cpu: dict[str, list[float]] = {name: [] for name in models}
+    floors = {
+        "floor, DDPG's networks": floor_update(models[BASELINE], batch_size),
+        "floor, DTDPG's networks": floor_update(dtdpg, batch_size),
+    }
+    wall: dict[str, list[float]] = {name: [] for name in [*models, *floors]}
+    cpu: dict[str, list[float]] = {name: [] for name in [*models, *floors]}
     for repeat in range(repeats):
         order = list(models) if repeat % 2 == 0 else list(models)[::-1]
         for name in order:
             steps_per_s_wall, steps_per_s_cpu = _timed_learn(models[name], steps)
             wall[name].append(steps_per_s_wall)
             cpu[name].append(steps_per_s_cpu)
-    dtdpg_wall, dtdpg_cpu = np.array(wall["DTDPG"]), np.array(cpu["DTDPG"])
-    return {
+        for name, update in floors.items():  # as many updates as a chunk has steps, in the same round
+            updates_per_s_wall, updates_per_s_cpu = _timed_updates(update, steps)
+            wall[name].append(updates_per_s_wall)
+            cpu[name].append(updates_per_s_cpu)
+    lean_wall, lean_cpu = np.array(wall[DTDPG_LEAN]), np.array(cpu[DTDPG_LEAN])
+    base_wall, base_cpu = np.array(wall[BASELINE]), np.array(cpu[BASELINE])
+    results = {
         name: dict(
             steps_per_s=float(np.median(wall[name])),
-            ratio_wall=float(np.median(dtdpg_wall / np.array(wall[name]))),
-            ratio_cpu=float(np.median(dtdpg_cpu / np.array(cpu[name]))),
+            ratio_wall=float(np.median(lean_wall / np.array(wall[name]))),
+            ratio_cpu=float(np.median(lean_cpu / np.array(cpu[name]))),
+            over_ddpg_cpu=float(np.median(np.array(cpu[name]) / base_cpu)),
         )
         for name in models
     }
+    for name in floors:
+        results[name] = dict(
+            steps_per_s=float(np.median(wall[name])),
+            over_ddpg_wall=float(np.median(np.array(wall[name]) / base_wall)),
+            over_ddpg_cpu=float(np.median(np.array(cpu[name]) / base_cpu)),
+        )
+    return results
 
 
 def vec_benchmark(n_envs: int, net_arch: list[int], batch_size: int, steps: int, repeats: int, seed: int) -> dict[str, dict]:
@@ -110,11 +191,11 @@ def vec_benchmark(n_envs: int, net_arch: list[int], batch_size: int, steps: int,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=["Pendulum-v1", "NomaRadioMap-v0"])
-    parser.add_argument("--net-arch", type=int, nargs="+", default=[128, 64], help="hidden layers (DTDPG's default)")
-    parser.add_argument("--batch-size", type=int, default=64)
+    parser.add_argument("--net-arch", type=int, nargs="+", default=[128, 128], help="hidden layers (DTDPG's default)")
+    parser.add_argument("--batch-size", type=int, default=128, help="minibatch size (DTDPG's default)")
     parser.add_argument("--vec-envs", type=int, default=0, help="compare DTDPG on 1 env with the vector env of N (0: skip)")
-    parser.add_argument("--steps", type=int, default=1000, help="env steps per timed chunk")
-    parser.add_argument("--repeats", type=int, default=7, help="timed chunks per algorithm, alternating")
+    parser.add_argument("--steps", type=int, default=500, help="env steps per timed chunk")
+    parser.add_argument("--repeats", type=int, default=5, help="timed chunks per algorithm, alternating")
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads (1: fastest for small nets)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
@@ -132,14 +213,26 @@ def main() -> None:
         for name, r in results.items():
             print(f"{name:<40} {r['steps_per_s']:>14.0f} {r['cpu_steps_per_s']:>8.0f} {r['cpu_steps_per_s'] / base:>11.2f}x")
         return
-    print(f"{'env':<18} {'baseline':<17} {'steps/s':>8} {'DTDPG/baseline (wall)':>22} {'(CPU time)':>11}")
+    print(
+        f"{'env':<18} {'variant':<25} {'steps/s':>8} {'DTDPG/variant (wall)':>21} {'(CPU time)':>11} "
+        f"{'variant/SB3 DDPG (CPU)':>23}"
+    )
     for env_id in args.envs:
         if not _available(env_id):
             print(f"{env_id:<18} (not available, skipped)")
             continue
         results = benchmark(env_id, args.net_arch, args.batch_size, args.steps, args.repeats, args.seed)
         for name, r in results.items():
-            print(f"{env_id:<18} {name:<17} {r['steps_per_s']:>8.0f} {r['ratio_wall']:>21.2f}x {r['ratio_cpu']:>10.2f}x")
+            if "ratio_wall" in r:
+                print(
+                    f"{env_id:<18} {name:<25} {r['steps_per_s']:>8.0f} {r['ratio_wall']:>20.2f}x {r['ratio_cpu']:>10.2f}x "
+                    f"{r['over_ddpg_cpu']:>22.2f}x"
+                )
+            else:
+                print(
+                    f"{env_id:<18} {name:<25} {r['steps_per_s']:>8.0f}   updates/s: {r['over_ddpg_wall']:.2f}x SB3 DDPG's "
+                    f"steps/s (wall), {r['over_ddpg_cpu']:.2f}x (CPU time)"
+                )
 
 
 if __name__ == "__main__":

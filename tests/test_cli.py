@@ -3,6 +3,7 @@
 import dataclasses
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 from stable_baselines3 import DDPG
@@ -28,7 +29,7 @@ def _agg_backend(monkeypatch):
 def test_compare_writes_table_csv_figures_and_event_files(tmp_path, capsys):
     assert main(["compare", "--budget", "_micro", "--preset", "paper", "--seeds", "2", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
-    assert "DT-DPG" in printed and "DDPG" in printed and "comm-aware planner" in printed
+    assert "DT-DPG" in printed and "DDPG" in printed and "best planner" in printed and "shortest-path planner" in printed
     for name in ("results.md", "results.csv", "results_runs.csv", "learning_curves.png", "trajectories.png"):
         assert (tmp_path / name).stat().st_size > 0, name
 
@@ -42,7 +43,12 @@ def test_compare_writes_table_csv_figures_and_event_files(tmp_path, capsys):
     ]
     assert (learners["n"] == 2).all()
     planners = summary[summary["ci_over"] == "episodes"].set_index(["algorithm", "multiple_access"])
-    assert planners.loc[("comm-aware planner", "NOMA"), "success_rate"] == 1.0
+    assert planners.loc[("best planner", "NOMA"), "success_rate"] == 1.0
+    # Every row as a fraction of both planners (in its mode); the best planner has its upper bound.
+    assert planners.loc[("best planner", "NOMA"), "mqi_of_best"] == 1.0
+    assert planners.loc[("shortest-path planner", "OMA"), "mqi_of_shortest"] == 1.0
+    assert np.isfinite(learners["mqi_of_best"]).all() and np.isfinite(learners["mqi_of_shortest"]).all()
+    assert np.isfinite(planners.loc[("best planner", "OMA"), "mqi_bound"])
     markdown = (tmp_path / "results.md").read_text()
     assert markdown.count("\n| ") == len(summary) + 1  # header + one line per row
 

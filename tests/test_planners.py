@@ -109,3 +109,68 @@ def test_comm_aware_levels_are_validated():
         CommAwarePlanner(levels=1)
     with pytest.raises(ValueError, match="lookahead"):
         ShortestPathPlanner(lookahead=0)
+
+
+@pytest.mark.parametrize("multiple_access", ["noma", "oma"])
+def test_min_outage_power_is_never_beaten_by_a_grid_of_splits(multiple_access):
+    from noma_radiomap.planners import min_outage_power
+
+    env = gym.make("NomaRadioMap-v0", multiple_access=multiple_access).unwrapped
+    gain, interference = channel_maps(env)
+    free = np.argwhere(~env.radio_map.blocked)
+    rng = np.random.default_rng(1)
+    cells = free[rng.choice(len(free), size=(300, 2))]
+    g, i = gain[cells[..., 0], cells[..., 1]], interference[cells[..., 0], cells[..., 1]]
+    active = rng.random((300, 2)) < 0.85
+    _, n_outage = min_outage_power(g, i, active, env.scenario, multiple_access)
+    radio, max_power_w = env.scenario.radio, float(dbm_to_watt(env.scenario.ap.max_power_dbm))
+    grid = np.array(list(itertools.product(np.linspace(-1.0, 1.0, 61), repeat=2)))
+    power = allocate_power(grid, max_power_w)[None]
+    rate = downlink(
+        power,
+        g[:, None],
+        i[:, None],
+        radio.bandwidth_per_robot_hz,
+        float(dbm_to_watt(radio.noise_dbm_per_hz)),
+        multiple_access,
+    ).rate_bps
+    grid_best = (in_outage(rate, radio.qos_rate_bps) & active[:, None]).sum(axis=-1).min(axis=1)
+    assert np.all(n_outage <= grid_best)
+    assert 0 < n_outage.sum() < active.sum()  # the sample has served and unserved robots
+
+
+@pytest.mark.parametrize("multiple_access", ["noma", "oma"])
+def test_rayleigh_success_matches_monte_carlo(multiple_access):
+    from noma_radiomap.planners import rayleigh_success
+
+    env = gym.make("NomaRadioMap-v0", multiple_access=multiple_access).unwrapped
+    scenario, radio_map = env.scenario, env.radio_map
+    ix, iy = np.array([60, 40]), np.array([24, 40])
+    gain = radio_map.path_gain["ap"][ix, iy]
+    powers = dbm_to_watt(np.array([i.power_dbm for i in scenario.interferers]))
+    interferer = np.stack([radio_map.path_gain[i.name][ix, iy] for i in scenario.interferers], axis=-1) * powers
+    max_power_w = float(dbm_to_watt(scenario.ap.max_power_dbm))
+    split = np.array([[0.2, 0.8], [0.5, 0.5], [0.9, 0.1]]) * max_power_w
+    predicted = rayleigh_success(split[None], gain[None], interferer[None], scenario, multiple_access)[0]
+    rng = np.random.default_rng(0)
+    fading = rng.exponential(size=(100_000, 1, 2, 1 + len(powers)))
+    rate = downlink(
+        split[None],
+        gain * fading[..., 0],
+        (interferer * fading[..., 1:]).sum(axis=-1),
+        scenario.radio.bandwidth_per_robot_hz,
+        float(dbm_to_watt(scenario.radio.noise_dbm_per_hz)),
+        multiple_access,
+    ).rate_bps
+    measured = (~in_outage(rate, scenario.radio.qos_rate_bps)).mean(axis=0)
+    # OMA is exact; NOMA's planning model keeps the mean decoding order (the fading may swap it).
+    np.testing.assert_allclose(predicted, measured, atol=0.01 if multiple_access == "oma" else 0.03)
+
+
+def test_shortest_path_power_is_validated():
+    with pytest.raises(ValueError, match="power"):
+        ShortestPathPlanner(power="greedy")
+    from noma_radiomap.planners import ReferencePlanner
+
+    with pytest.raises(ValueError, match="weights"):
+        ReferencePlanner(weights=(0.0,))

@@ -107,6 +107,27 @@ def test_state_action_batch_norm_normalises_each_column_by_running_statistics():
     np.testing.assert_allclose(norm.action_norm.running_var.numpy(), x[:, 2:].var(axis=0, ddof=1))
 
 
+def test_state_action_batch_norm_updates_statistics_as_batch_norm_layers_do():
+    # The running statistics and batch counters are bit for bit those of BatchNorm1d layers in train mode fed the
+    # same (non-contiguous) column blocks of the input
+    th.manual_seed(0)
+    norm = StateActionBatchNorm(features_dim=3, action_dim=2, momentum=0.05, eps=1e-3).train()
+    layers = [
+        nn.BatchNorm1d(3, eps=1e-3, momentum=0.05, affine=False),
+        nn.BatchNorm1d(2, eps=1e-3, momentum=0.05, affine=False),
+    ]
+    for _ in range(4):
+        x = th.randn(64, 5) * th.tensor([3.0, 0.1, 20.0, 1.0, 0.5]) + th.tensor([1.0, -2.0, 50.0, 0.0, 0.3])
+        norm(x)
+        with th.no_grad():
+            for layer, part in zip(layers, x.split([3, 2], dim=1), strict=True):
+                layer(part)
+    for mine, layer in zip((norm.state_norm, norm.action_norm), layers, strict=True):
+        assert th.equal(mine.running_mean, layer.running_mean)
+        assert th.equal(mine.running_var, layer.running_var)
+        assert int(mine.num_batches_tracked) == int(layer.num_batches_tracked) == 4
+
+
 def test_batch_norm_stats_unchanged_by_collection():
     # learning_starts=0: the policy acts from the first step (batch of one observation); gradient_steps=0: no training.
     model = _model(learning_starts=0, gradient_steps=0)

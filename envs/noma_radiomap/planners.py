@@ -5,6 +5,12 @@
   speed, with the AP power split equally between the robots.
 - :class:`CommAwarePlanner`: Dijkstra on the grid with an outage-aware cost from the radio map, plus a
   per-step power allocation that minimises the number of robots in outage (NOMA or OMA).
+- :class:`ShortestPathPlanner` with ``power="best"``: the shortest paths with the exact outage-minimising
+  power split at every step (:func:`min_outage_power`).
+- :class:`ReferencePlanner`: the best planner, a joint search over candidate paths of all robots (the
+  shortest paths among them) with the exact power split per step, judged on the radio-map channel; it never
+  scores below the shortest-path planner with the best power there. :func:`mqi_upper_bound` bounds the MQI
+  of any policy from above (its optimality gap).
 
 They read the true state of the env (positions, destinations, the radio map), so they follow the
 :class:`sb3_dtdpg.evaluation.Planner` protocol: ``reset(env)`` after every ``env.reset`` and
@@ -25,11 +31,21 @@ import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from noma_radiomap import geometry
-from noma_radiomap.downlink import allocate_power, downlink, in_outage
+from noma_radiomap.downlink import allocate_power, decoding_order, downlink, equivalent_gain, in_outage
 from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import dbm_to_watt
 
-__all__ = ["CommAwarePlanner", "GridPlanner", "RandomPlanner", "ShortestPathPlanner", "channel_maps", "grid_costs_to_goal"]
+__all__ = [
+    "CommAwarePlanner",
+    "GridPlanner",
+    "RandomPlanner",
+    "ReferencePlanner",
+    "ShortestPathPlanner",
+    "channel_maps",
+    "grid_costs_to_goal",
+    "min_outage_power",
+    "mqi_upper_bound",
+]
 
 
 def grid_costs_to_goal(
@@ -173,7 +189,8 @@ class GridPlanner:
         for _ in range(n_chunks):
             target = position + delta
             position, _ = self._motion.move(position, delta[None, :] / step)
-            if not np.allclose(position, target, atol=1e-9):
+            # np.allclose(position, target, atol=1e-9), written out (this is the planners' inner loop)
+            if not (np.abs(position - target) <= 1e-9 + 1e-5 * np.abs(target)).all():
                 return False
         return True
 
@@ -226,7 +243,24 @@ class GridPlanner:
 
 
 class ShortestPathPlanner(GridPlanner):
-    """Shortest path on the occupancy grid (Dijkstra, 8-connected), full speed, equal power split."""
+    """
+    Shortest path on the occupancy grid (Dijkstra, 8-connected), full speed.
+
+    :param power: ``"equal"`` (the AP power split equally, radio-blind) or ``"best"`` (the exact
+        outage-minimising split of :func:`min_outage_power` at every step, on the radio-map channel)
+    :param lookahead: how many path points ahead a robot may aim at
+    """
+
+    def __init__(self, power: str = "equal", lookahead: int = 8) -> None:
+        super().__init__(lookahead)
+        if power not in ("equal", "best"):
+            raise ValueError(f"power must be 'equal' or 'best', got {power!r}")
+        self.power = power
+
+    def power_actions(self, env: Any, next_positions: np.ndarray, active: np.ndarray) -> np.ndarray:
+        if self.power == "equal":
+            return super().power_actions(env, next_positions, active)
+        return best_power(env, next_positions[None], active[None])[0][0]
 
 
 class CommAwarePlanner(GridPlanner):
@@ -304,3 +338,442 @@ class CommAwarePlanner(GridPlanner):
         margin = np.where(active, rate / qos, np.inf).min(axis=1)
         best = np.lexsort((-margin, n_outage))[0]
         return self._grid[best]
+
+
+def _qos_sinr(scenario: Any, multiple_access: str) -> float:
+    """The SINR a robot needs to meet the QoS rate: ``2^(R / bandwidth) - 1`` (NOMA: ``W = U B``, OMA: ``B``)."""
+    radio = scenario.radio
+    band = radio.bandwidth_per_robot_hz * (scenario.n_robots if multiple_access == "noma" else 1)
+    return float(2.0 ** (radio.qos_rate_bps / band) - 1.0)
+
+
+def _least_powers(
+    gain: np.ndarray, interference_w: np.ndarray, served: np.ndarray, scenario: Any, multiple_access: str
+) -> np.ndarray:
+    """
+    The least powers (..., U) that meet the QoS of the ``served`` robots, the others given none.
+
+    NOMA (docs/MODEL.md): with SIC a robot hears the signals of the robots stronger than itself, so the powers
+    are set from the strongest served robot down: ``p_u = gamma (g_u P_stronger + I_u + N0 W) / g_u``. OMA:
+    ``p_u = gamma (I_u / U + N0 B) / g_u``, each robot on its own band.
+    """
+    radio, n_robots = scenario.radio, scenario.n_robots
+    noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
+    gamma = _qos_sinr(scenario, multiple_access)
+    if multiple_access == "oma":
+        need = gamma * (interference_w / n_robots + noise_w_per_hz * radio.bandwidth_per_robot_hz) / gain
+        return np.where(served, need, 0.0)
+    noise_w = noise_w_per_hz * radio.bandwidth_per_robot_hz * n_robots
+    order = decoding_order(equivalent_gain(gain, interference_w, noise_w))  # weakest first
+    power = np.zeros(gain.shape)
+    stronger = np.zeros(gain.shape[:-1])
+    for rank in range(n_robots - 1, -1, -1):
+        u = order[..., rank : rank + 1]
+        g, i, s = (np.take_along_axis(a, u, axis=-1)[..., 0] for a in (gain, interference_w, served))
+        p = np.where(s, gamma * (g * stronger + i + noise_w) / g, 0.0)
+        np.put_along_axis(power, u, p[..., None], axis=-1)
+        stronger = stronger + p
+    return power
+
+
+def min_outage_power(
+    gain: np.ndarray, interference_w: np.ndarray, active: np.ndarray, scenario: Any, multiple_access: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """
+    The power split that puts the fewest active robots in outage, exactly: over every subset of the active
+    robots, the least powers that serve it (:func:`_least_powers`); the largest subset that fits in ``P_max``
+    wins (ties: the least total power), and its powers are scaled up to the whole ``P_max`` (every served
+    robot's SINR grows with a common factor, in NOMA and OMA alike). Robots not served get no power.
+
+    The outage is then measured with the env's own power mapping and downlink
+    (:func:`~noma_radiomap.downlink.allocate_power`, :func:`~noma_radiomap.downlink.downlink`).
+
+    :param gain: linear AP gains, shape (T, U)
+    :param interference_w: interference powers, shape (T, U)
+    :param active: robots that have not arrived, bool (T, U)
+    :param scenario: the scenario (its radio constants, ``P_max``)
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :return: the power actions in [-1, 1], shape (T, U), and the number of active robots in outage (T,)
+    """
+    gain, interference_w = np.asarray(gain, dtype=np.float64), np.asarray(interference_w, dtype=np.float64)
+    active = np.asarray(active, dtype=bool)
+    n_rows, n_robots = gain.shape
+    max_power_w = float(dbm_to_watt(scenario.ap.max_power_dbm))
+    best_power = np.zeros(gain.shape)
+    best_key = np.full(n_rows, np.inf)
+    for subset in itertools.product((False, True), repeat=n_robots):
+        mask = np.array(subset)
+        served = np.broadcast_to(mask, gain.shape) & active
+        fits = ~(mask & ~active).any(axis=1)  # the subset's robots are all active
+        power = _least_powers(gain, interference_w, served, scenario, multiple_access) * (1.0 + 1e-9)
+        total = power.sum(axis=1)
+        fits &= total <= max_power_w
+        # Fewest in outage first (more served), then the least total power.
+        key = -sum(subset) * 2.0 * max_power_w + total
+        better = fits & (key < best_key)
+        best_key = np.where(better, key, best_key)
+        best_power = np.where(better[:, None], power, best_power)
+    total = best_power.sum(axis=1, keepdims=True)
+    best_power = np.where(total > 0, best_power * (max_power_w / np.maximum(total, 1e-300)), best_power)
+    actions = np.clip(np.where(active, 2.0 * best_power / max_power_w - 1.0, -1.0), -1.0, 1.0)
+    radio = scenario.radio
+    rate = downlink(
+        allocate_power(actions, max_power_w),
+        gain,
+        interference_w,
+        radio.bandwidth_per_robot_hz,
+        float(dbm_to_watt(radio.noise_dbm_per_hz)),
+        multiple_access,
+    ).rate_bps
+    return actions, (in_outage(rate, radio.qos_rate_bps) & active).sum(axis=1)
+
+
+def single_outage_maps(env: Any, multiple_access: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Per cell, whether a robot alone (its cluster mates off) is in outage with the whole AP power, and whether
+    it needs more than the equal share ``P_max / U``, on the radio-map channel.
+
+    :param env: the unwrapped env
+    :param multiple_access: ``"noma"`` or ``"oma"``; None: the env's
+    :return: two bool arrays (nx, ny)
+    """
+    multiple_access = env.multiple_access if multiple_access is None else multiple_access
+    gain, interference = channel_maps(env)
+    scenario, n_robots = env.scenario, env.scenario.n_robots
+    served = np.zeros((gain.size, n_robots), dtype=bool)
+    served[:, 0] = True
+    stacked = [np.repeat(a.reshape(-1, 1), n_robots, axis=1) for a in (gain, interference)]
+    need = _least_powers(stacked[0], stacked[1], served, scenario, multiple_access)[:, 0].reshape(gain.shape)
+    max_power_w = float(dbm_to_watt(scenario.ap.max_power_dbm))
+    return need > max_power_w, need > max_power_w / n_robots
+
+
+def _reach_offsets(scenario: Any) -> np.ndarray:
+    """Cell offsets a robot can cover in one step, from anywhere in a cell to anywhere in another."""
+    resolution = scenario.room.resolution
+    reach = scenario.robot.v_max * scenario.mission.time_step + np.sqrt(2.0) * resolution
+    n = int(np.floor(reach / resolution))
+    offsets = np.array([(i, j) for i in range(-n, n + 1) for j in range(-n, n + 1) if np.hypot(i, j) * resolution <= reach])
+    return offsets
+
+
+def mqi_upper_bound(env: Any, starts: np.ndarray, destinations: np.ndarray) -> float:
+    """
+    An upper bound on the MQI of any policy on one mission, on the radio-map channel: a relaxation in which
+    each robot is alone with the whole AP power (no NOMA coupling, no power split) and may move from anywhere
+    in its cell to any free cell within ``V_max dt`` plus a cell diagonal per step (walls ignored within a step).
+    Per robot, value iteration on the grid gives the least ``steps + lambda x outage steps`` to arrive
+    (within ``arrival_radius`` plus half a cell diagonal); the bound is ``t_total`` minus their sum.
+
+    :param env: the unwrapped env (its scenario, radio map and multiple access)
+    :param starts: start points (U, 2)
+    :param destinations: destinations (U, 2)
+    :return: the bound
+    """
+    scenario, radio_map = env.scenario, env.radio_map
+    mission = scenario.mission
+    outage, _ = single_outage_maps(env)
+    step_cost = np.where(radio_map.blocked, np.inf, 1.0 + mission.outage_penalty * outage)
+    offsets = _reach_offsets(scenario)
+    pad = int(np.abs(offsets).max())
+    nx, ny = step_cost.shape
+    centres = (np.stack(np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij"), axis=-1) + 0.5) * scenario.room.resolution
+    arrival = scenario.robot.arrival_radius + scenario.room.resolution / np.sqrt(2)
+    total = 0.0
+    for start, goal in zip(np.asarray(starts, dtype=float), np.asarray(destinations, dtype=float), strict=True):
+        near = np.hypot(*(centres - goal).transpose(2, 0, 1)) <= arrival
+        to_go = np.full((nx, ny), np.inf)  # least cost to arrive from each cell, not yet arrived
+        for _ in range(int(mission.max_steps)):
+            after = step_cost + np.where(near, 0.0, to_go)  # cost of stepping into a cell
+            padded = np.pad(after, pad, constant_values=np.inf)
+            new = np.full((nx, ny), np.inf)
+            for dx, dy in offsets:
+                np.minimum(new, padded[pad + dx : pad + dx + nx, pad + dy : pad + dy + ny], out=new)
+            if np.array_equal(new, to_go):
+                break
+            to_go = new
+        cell = tuple(int(i) for i in radio_map.cell_index(start))
+        total += min(float(to_go[cell]), float(mission.max_steps))
+    return float(mission.t_total - total)
+
+
+class _PathFollower(GridPlanner):
+    """A :class:`GridPlanner` with a given extra path cost per metre (one candidate of :class:`ReferencePlanner`)."""
+
+    def __init__(self, extra: np.ndarray | None, lookahead: int) -> None:
+        super().__init__(lookahead)
+        self._given_extra = extra
+
+    def extra_cost(self, env: Any) -> np.ndarray | None:
+        return self._given_extra
+
+    def _clear(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """Whether the straight segment stays in free cells (sampled every 1/8 cell): a quicker test than the
+        base class's, for a candidate only (its rollout uses the env's motion model all the same)."""
+        if self._given_extra is None:  # the shortest path: exactly the ShortestPathPlanner's following
+            return super()._clear(start, end)
+        n = max(2, int(np.ceil(8.0 * np.linalg.norm(end - start) / self._motion.resolution)) + 1)
+        points = start + np.linspace(0.0, 1.0, n)[:, None] * (end - start)
+        return bool(self._motion.is_free(points).all())
+
+
+class _Shim:
+    """The state a :class:`GridPlanner` reads from an env, for rolling a candidate path out without the env."""
+
+    def __init__(self, env: Any, positions: np.ndarray, destinations: np.ndarray, arrived: np.ndarray) -> None:
+        self.radio_map, self.scenario, self.multiple_access = env.radio_map, env.scenario, env.multiple_access
+        self.positions, self.destinations, self.arrived = positions, destinations, arrived
+
+
+class ReferencePlanner:
+    """
+    The best planner: a joint search over candidate paths of all robots, with the exact outage-minimising power
+    split at every step (:func:`min_outage_power`), judged on the radio-map channel (the env's expected channel).
+
+    Candidates per robot: the paths of :class:`GridPlanner` (followed at full speed, the same path following)
+    for the path costs ``1 + w lambda o(cell)`` per metre, with ``o`` the robot-alone outage at ``P_max`` or
+    the need of more than the equal share ``P_max / U`` (:func:`single_outage_maps`, in NOMA and in OMA: the
+    same candidates in both modes) and ``w`` in ``weights``, plus the shortest path (``w = 0``). Each distinct
+    candidate is rolled out once with the env's motion model; every combination of one candidate per robot is
+    then scored exactly (``sum_u T_u + lambda x outage`` with the robots coupled through the power split, step
+    by step) and the best is followed. The shortest paths with
+    the best power are one of the combinations (ties go to them), so on the radio-map channel the planner never
+    scores below :class:`ShortestPathPlanner` with ``power="best"``.
+
+    With the Rayleigh channel (motion does not depend on the fading, so the rollouts are the same) the
+    combinations are scored, and the power split chosen, by the expected number of outages under fading
+    (:func:`best_power`). Candidate rollouts are cached per scenario and mission (starts,
+    destinations), plans per mode and channel too: one instance evaluated on several modes and channels rolls
+    every candidate out once.
+
+    :param weights: the outage weights ``w`` of the candidate paths
+    :param lookahead: how many path points ahead a robot may aim at
+    """
+
+    def __init__(self, weights: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0), lookahead: int = 8) -> None:
+        if not weights or any(not np.isfinite(w) or w <= 0 for w in weights):
+            raise ValueError(f"weights must be positive and finite, got {weights!r}")
+        self.weights = tuple(float(w) for w in weights)
+        self.lookahead = lookahead
+        self._key: int | None = None
+        self._plans: dict[tuple[str, bytes], tuple[np.ndarray, np.ndarray, float]] = {}
+        self._rollouts: dict[tuple[int, bytes, bytes], list[tuple[np.ndarray, np.ndarray]]] = {}
+        self._plan: np.ndarray | None = None
+        self._positions: np.ndarray | None = None
+        self._step = 0
+        #: the planned cost ``sum_u T_u + lambda x outage`` of the current mission on the radio-map channel
+        self.planned_cost = float("nan")
+
+    def _setup(self, env: Any) -> None:
+        key = id(env.radio_map)
+        if key == self._key:
+            return
+        self._key, self._plans, self._rollouts = key, {}, {}
+        penalty = env.scenario.mission.outage_penalty
+        self._followers = [_PathFollower(None, self.lookahead)]
+        # The same candidates in both modes (a mode's outage map is a useful proxy in the other one).
+        for mode in ("noma", "oma"):
+            for o in single_outage_maps(env, mode):
+                for w in self.weights:
+                    self._followers.append(_PathFollower(w * penalty * o.astype(float), self.lookahead))
+        self._motion = GridMotion(
+            env.radio_map.blocked,
+            env.scenario.room,
+            max_step=env.scenario.robot.v_max * env.scenario.mission.time_step,
+            arrival_radius=env.scenario.robot.arrival_radius,
+        )
+
+    def _candidates(
+        self, env: Any, u: int, positions: np.ndarray, destinations: np.ndarray
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Robot ``u``'s distinct candidate rollouts (motion actions and positions), cached per mission."""
+        key = (u, positions.tobytes(), destinations.tobytes())
+        if key not in self._rollouts:
+            seen: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+            planned: set[bytes] = set()
+            for follower in self._followers:
+                follower._setup(env)
+                points = follower._plan(env, positions[u], destinations[u])[0].tobytes()
+                if points in planned:  # the same grid path: the same rollout
+                    continue
+                planned.add(points)
+                motions, path = self._rollout(env, follower, u, positions, destinations)
+                seen.setdefault(path.tobytes(), (motions, path))
+            self._rollouts[key] = list(seen.values())
+        return self._rollouts[key]
+
+    def _rollout(
+        self, env: Any, follower: GridPlanner, u: int, positions: np.ndarray, destinations: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Robot ``u`` alone following a candidate: its motion actions (T, 2) and positions after each step (T, 2)."""
+        arrived = np.ones(len(positions), dtype=bool)
+        arrived[u] = False
+        shim = _Shim(env, positions.copy(), destinations, arrived)
+        follower.reset(shim)
+        motions, path = [], []
+        for _ in range(int(env.scenario.mission.max_steps)):
+            action = follower.act(shim, None).reshape(-1, 3)
+            shim.positions, at_goal = self._motion.move(shim.positions, action[:, :2], destinations, ~shim.arrived)
+            shim.arrived = shim.arrived | at_goal
+            motions.append(action[u, :2])
+            path.append(shim.positions[u].copy())
+            if shim.arrived[u]:
+                break
+        return np.array(motions), np.array(path)
+
+    def _search(self, env: Any, positions: np.ndarray, destinations: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        n_robots = len(positions)
+        candidates = [self._candidates(env, u, positions, destinations) for u in range(n_robots)]
+        penalty = env.scenario.mission.outage_penalty
+        best: tuple[float, tuple[int, ...]] | None = None
+        for combo in itertools.product(*(range(len(c)) for c in candidates)):
+            paths = [candidates[u][k][1] for u, k in enumerate(combo)]
+            arrival = np.array([len(p) for p in paths])
+            horizon = int(arrival.max())
+            steps = np.arange(horizon)
+            at = np.stack([p[np.minimum(steps, len(p) - 1)] for p in paths], axis=1)  # (T, U, 2)
+            active = steps[:, None] < arrival[None, :]
+            _, n_outage = best_power(env, at, active)
+            # A robot that never arrives is active until max_steps: its path is max_steps long.
+            cost = float(arrival.sum() + penalty * n_outage.sum())
+            if best is None or cost < best[0] - 1e-9:
+                best = (cost, combo)
+        assert best is not None
+        cost, combo = best
+        horizon = max(len(candidates[u][k][0]) for u, k in enumerate(combo))
+        motion = np.zeros((horizon, n_robots, 2))
+        for u, k in enumerate(combo):
+            motions = candidates[u][k][0]
+            motion[: len(motions), u] = motions
+        path = np.stack(
+            [candidates[u][k][1][np.minimum(np.arange(horizon), len(candidates[u][k][1]) - 1)] for u, k in enumerate(combo)],
+            axis=1,
+        )
+        return motion, path, cost
+
+    def reset(self, env: Any) -> None:
+        self._setup(env)
+        positions, destinations, _ = _env_state(env)
+        key = (
+            f"{env.multiple_access}/{getattr(env, 'channel', 'radio_map')}",
+            np.concatenate([positions, destinations]).tobytes(),
+        )
+        if key not in self._plans:
+            self._plans[key] = self._search(env, positions, destinations)
+        self._plan, self._path, self.planned_cost = self._plans[key]
+        self._step = 0
+
+    def act(self, env: Any, observation: np.ndarray) -> np.ndarray:
+        positions, _, arrived = _env_state(env)
+        expected = self._path[self._step - 1] if self._step > 0 else None
+        if (
+            self._plan is None
+            or self._step >= len(self._plan)
+            or (expected is not None and not np.allclose(positions[~arrived], expected[~arrived], atol=1e-9))
+        ):
+            self.reset(env)  # off the plan (not reset after env.reset, or moved by someone else): plan from here
+        motion = self._plan[self._step]
+        power, _ = best_power(env, self._path[self._step][None], (~arrived)[None])
+        self._step += 1
+        return np.concatenate([motion, power[0][:, None]], axis=1).ravel().astype(np.float32)
+
+
+def _power_splits(n_robots: int, levels: int) -> np.ndarray:
+    """Every split of the whole power into ``levels - 1`` equal parts over the robots: fractions (K, U) summing to 1."""
+    parts = levels - 1
+    splits = [c for c in itertools.product(range(parts + 1), repeat=n_robots) if sum(c) == parts]
+    return np.array(splits, dtype=np.float64) / parts
+
+
+def rayleigh_success(
+    power_w: np.ndarray, gain: np.ndarray, interferer_w: np.ndarray, scenario: Any, multiple_access: str
+) -> np.ndarray:
+    """
+    Probability that each robot meets the QoS under Rayleigh fading (every link ``|h|^2 ~ Exp(1)``, independent),
+    for powers ``power_w`` (..., K, U): for a robot whose SINR must beat ``gamma`` against noise ``N`` and interferers
+    of mean received powers ``m_i``, ``P = exp(-gamma N / S) prod_i 1 / (1 + gamma m_i / S)`` with ``S`` its mean useful
+    power. NOMA: ``S = g (p_u - gamma P_stronger)`` (the stronger robots' signals share the robot's fading), the order
+    being that of the mean equivalent gains (the fading may reorder it at a step; this is the planning model).
+    OMA: ``S = g p_u`` against ``N0 B`` and ``m_i / U``.
+
+    :param power_w: powers, shape (..., K, U)
+    :param gain: mean AP gains (the path gain, no fading), shape (..., U)
+    :param interferer_w: mean interference power from each interferer, shape (..., U, I)
+    :param scenario: the scenario (radio constants)
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :return: the probabilities, shape (..., K, U)
+    """
+    radio, n_robots = scenario.radio, scenario.n_robots
+    noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
+    gamma = _qos_sinr(scenario, multiple_access)
+    g = gain[..., None, :]
+    m = interferer_w[..., None, :, :]
+    if multiple_access == "oma":
+        useful, noise, m = g * power_w, noise_w_per_hz * radio.bandwidth_per_robot_hz, m / n_robots
+    else:
+        noise = noise_w_per_hz * radio.bandwidth_per_robot_hz * n_robots
+        order = decoding_order(equivalent_gain(gain, interferer_w.sum(axis=-1), noise))  # weakest first
+        rank = np.argsort(order, axis=-1)[..., None, :]  # each robot's place in the order
+        # The power of the robots stronger than each robot: those with a higher rank.
+        stronger = ((rank[..., None, :] > rank[..., :, None]) * power_w[..., None, :]).sum(axis=-1)
+        useful = g * (power_w - gamma * stronger)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(useful > 0, gamma / np.where(useful > 0, useful, 1.0), np.inf)
+        probability = np.exp(-ratio * noise) / np.prod(1.0 + ratio[..., None] * m, axis=-1)
+    return np.where(useful > 0, probability, 0.0)
+
+
+def rayleigh_power(
+    gain: np.ndarray,
+    interferer_w: np.ndarray,
+    active: np.ndarray,
+    scenario: Any,
+    multiple_access: str,
+    levels: int | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """
+    The power split with the fewest expected outages under Rayleigh fading (:func:`rayleigh_success`), searched over
+    the splits of the whole ``P_max`` on a grid (:func:`_power_splits`); robots that arrived get no power.
+
+    :param gain: mean AP gains (path gains), shape (T, U)
+    :param interferer_w: mean interference power from each interferer, shape (T, U, I)
+    :param active: robots that have not arrived, bool (T, U)
+    :param scenario: the scenario
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :param levels: grid levels per robot (default: 41 for two robots, fewer for more)
+    :return: the power actions (T, U) and the expected number of active robots in outage (T,)
+    """
+    n_robots = scenario.n_robots
+    levels = levels or max(3, min(41, int(4000 ** (1.0 / max(1, n_robots - 1)))))
+    max_power_w = float(dbm_to_watt(scenario.ap.max_power_dbm))
+    active = np.asarray(active, dtype=bool)
+    power = _power_splits(n_robots, levels)[None] * active[:, None, :]  # (T, K, U)
+    total = power.sum(axis=-1, keepdims=True)
+    power = np.where(total > 0, power / np.where(total > 0, total, 1.0), 0.0) * max_power_w
+    success = rayleigh_success(power, gain, interferer_w, scenario, multiple_access)
+    expected = ((1.0 - success) * active[:, None, :]).sum(axis=-1)  # (T, K)
+    best = np.argmin(expected, axis=1)
+    rows = np.arange(len(best))
+    actions = np.clip(2.0 * power[rows, best] / max_power_w - 1.0, -1.0, 1.0)
+    return np.where(active, actions, -1.0), expected[rows, best]
+
+
+def best_power(env: Any, positions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """
+    The best power split of every row of robot positions for the env's channel: exact on the radio-map channel
+    (:func:`min_outage_power`), the fewest expected outages on the Rayleigh channel (:func:`rayleigh_power`).
+
+    :param env: the unwrapped env (its scenario, radio map, mode and channel)
+    :param positions: robot positions, shape (T, U, 2)
+    :param active: robots that have not arrived, bool (T, U)
+    :return: power actions (T, U) and the (expected) number of active robots in outage (T,)
+    """
+    ix, iy = env.radio_map.cell_index(np.asarray(positions))
+    if getattr(env, "channel", "radio_map") == "rayleigh":
+        radio_map, scenario = env.radio_map, env.scenario
+        gain = radio_map.path_gain["ap"][ix, iy]
+        powers = dbm_to_watt(np.array([i.power_dbm for i in scenario.interferers], dtype=np.float64))
+        interferer = np.stack([radio_map.path_gain[i.name][ix, iy] for i in scenario.interferers], axis=-1) * powers
+        return rayleigh_power(gain, interferer.reshape(*gain.shape, len(powers)), active, scenario, env.multiple_access)
+    gain, interference = channel_maps(env)
+    return min_outage_power(gain[ix, iy], interference[ix, iy], active, env.scenario, env.multiple_access)

@@ -18,13 +18,14 @@ from sb3_dtdpg.common.buffers import reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
 from sb3_dtdpg.common.noise import decaying_noise
 from sb3_dtdpg.common.phases import Phase, parse_phases
+from sb3_dtdpg.dtdpg.lean import LeanStep
 from sb3_dtdpg.dtdpg.policies import CnnPolicy, DTDPGPolicy, MlpPolicy, MultiInputPolicy
 from sb3_dtdpg.missions import MissionLoggerCallback, default_curriculum
 
 SelfDTDPG = TypeVar("SelfDTDPG", bound="DTDPG")
 
 
-class DTDPG(DDPG):
+class DTDPG(LeanStep, DDPG):
     """
     Deep Transfer Deterministic Policy Gradient (DT-DPG).
 
@@ -95,6 +96,10 @@ class DTDPG(DDPG):
         (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved
     :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
         them over (ablation of the transfer, :meth:`reinitialize`)
+    :param lean: Train and act with the lean step (:mod:`sb3_dtdpg.dtdpg.lean`): SB3's TD3/DDPG update and
+        acting path with the same numbers bit for bit for the same seed, in fewer operations (~1.2x the steps/s of
+        ``lean=False`` on one CPU thread, docs/BENCHMARKS.md); False: SB3's generic ``train()`` and
+        ``_sample_action()`` (the reference the lean step is tested against)
     :param _init_setup_model: Whether or not to build the network at the creation of the instance
     """
 
@@ -130,6 +135,7 @@ class DTDPG(DDPG):
         phases: Iterable[Phase | Mapping[str, Any]] | None = None,
         curriculum_save_path: str | None = None,
         reinitialize_at_transfer: bool = False,
+        lean: bool = True,
         _init_setup_model: bool = True,
     ):
         super().__init__(
@@ -158,6 +164,7 @@ class DTDPG(DDPG):
         if n_steps is None and isinstance(getattr(self, "observation_space", None), spaces.Dict):
             self.n_steps = 1  # SB3's n-step buffer does not take Dict observations
         self.curriculum_save_path = curriculum_save_path
+        self.lean = lean
         self.reinitialize_at_transfer = reinitialize_at_transfer
         # Set by CurriculumTransferCallback at the first learn(), then saved with the model
         self.curriculum_state: dict[str, Any] | None = None

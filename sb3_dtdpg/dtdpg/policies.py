@@ -138,7 +138,9 @@ class StateActionBatchNorm(nn.Module):
     def _normalize(norm: nn.BatchNorm1d, x: th.Tensor) -> th.Tensor:
         if norm.training:
             with th.no_grad():
-                norm(x)  # update the running statistics with the batch
+                # what norm(x) does to the running statistics, without computing its (unused) output
+                th.batch_norm_update_stats(x, norm.running_mean, norm.running_var, norm.momentum)
+                norm.num_batches_tracked.add_(1)
         return F.batch_norm(x, norm.running_mean, norm.running_var, training=False, eps=norm.eps)
 
     def forward(self, state_action: th.Tensor) -> th.Tensor:

@@ -19,11 +19,15 @@ from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result,
 
 __all__ = ["compare_specs", "evaluate_planners", "run_compare"]
 
-PLANNERS = {
-    "comm-aware planner": "CommAwarePlanner",
-    "shortest-path planner": "ShortestPathPlanner",
-    "random": "RandomPlanner",
+#: The reference rows of the tables: label -> (class in :mod:`noma_radiomap.planners`, its keyword arguments).
+PLANNERS: dict[str, tuple[str, dict[str, Any]]] = {
+    "best planner": ("ReferencePlanner", {}),
+    "shortest-path planner": ("ShortestPathPlanner", {"power": "best"}),
+    "shortest path, equal power": ("ShortestPathPlanner", {}),
+    "random": ("RandomPlanner", {}),
 }
+#: The planners the learners are reported as a fraction of (:func:`sb3_dtdpg.experiments.tables.add_planner_fractions`).
+BEST_PLANNER, SHORTEST_PATH_PLANNER = "best planner", "shortest-path planner"
 
 
 def compare_specs(
@@ -75,8 +79,8 @@ def evaluate_planners(
     env_kwargs = {} if budget.scenario is None else {"scenario": budget.scenario}
     for mode in modes:
         trajectories[mode] = {}
-        for name, cls in PLANNERS.items():
-            planner = getattr(planners, cls)(**({"seed": eval_seed} if cls == "RandomPlanner" else {}))
+        for name, (cls, kwargs) in PLANNERS.items():
+            planner = getattr(planners, cls)(**({"seed": eval_seed} if cls == "RandomPlanner" else kwargs))
             result = evaluate(
                 planner,
                 env_id,
@@ -87,7 +91,10 @@ def evaluate_planners(
                 env_kwargs=env_kwargs,
                 return_trajectories=True,
             )
-            rows.append(planner_row(name, mode, result))
+            row = planner_row(name, mode, result)
+            if name == BEST_PLANNER:
+                row["mqi_bound"] = mission_bound(env_id, mode, budget.eval_episodes, eval_seed, env_kwargs)
+            rows.append(row)
             trajectories[mode][name] = result.trajectories[0]
     return rows, trajectories
 
@@ -96,6 +103,34 @@ def _finished_line(out: Path) -> Any:
     from sb3_dtdpg.experiments.reproduce import finished_line  # reproduce imports this module: import late
 
     return finished_line(out)
+
+
+def mission_bound(env_id: str, mode: str, n_episodes: int, eval_seed: int, env_kwargs: dict[str, Any]) -> float:
+    """
+    The mean over the test missions of :func:`noma_radiomap.planners.mqi_upper_bound` (radio-map channel): no
+    policy scores above it there, so ``bound - best planner`` bounds the best planner's optimality gap.
+
+    :param env_id: the env id
+    :param mode: ``"noma"`` or ``"oma"``
+    :param n_episodes: test missions (episode ``i`` reset with ``eval_seed + i``, as in :func:`evaluate_planners`)
+    :param eval_seed: the seed of the first test mission
+    :param env_kwargs: extra ``gymnasium.make`` keyword arguments
+    :return: the mean bound
+    """
+    import gymnasium as gym
+
+    from noma_radiomap.planners import mqi_upper_bound
+
+    env = gym.make(env_id, **{**env_kwargs, "channel": "radio_map", "multiple_access": mode})
+    try:
+        bounds = []
+        for episode in range(n_episodes):
+            env.reset(seed=eval_seed + episode)
+            base = env.unwrapped
+            bounds.append(mqi_upper_bound(base, base.positions, base.destinations))
+    finally:
+        env.close()
+    return float(sum(bounds) / len(bounds))
 
 
 def run_compare(
@@ -167,6 +202,7 @@ def run_compare(
         summary = tables.summarise(records) if not records.empty else pd.DataFrame()
         planner_rows, planner_paths = evaluate_planners(modes, budget, env_id)
         summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
+        summary = tables.add_planner_fractions(summary, BEST_PLANNER, SHORTEST_PATH_PLANNER)
         title = (
             f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes, "
             f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seed{'s' if seeds != 1 else ''}, "
@@ -207,7 +243,7 @@ def run_compare(
                 if first is not None and first["eval"]["trajectories"]:
                     panel[f"{tables.ALGO_LABELS[algo]} (seed {first['spec']['seed']})"] = first["eval"]["trajectories"][0]
                     goals[mode.upper()] = plots.episode_destinations(first["eval"]["episodes"][0])
-            panel["comm-aware planner"] = planner_paths[mode]["comm-aware planner"]
+            panel[BEST_PLANNER] = planner_paths[mode][BEST_PLANNER]
             panels[mode.upper()] = panel
         plots.plot_trajectories(
             budget.scenario or "mall",

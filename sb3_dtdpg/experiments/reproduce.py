@@ -27,7 +27,7 @@ import pandas as pd
 from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import plots, tables
-from sb3_dtdpg.experiments.compare import evaluate_planners
+from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
 from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
 __all__ = ["EXPERIMENTS", "LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
@@ -295,6 +295,7 @@ def run_reproduce(
             summary = tables.summarise(rec)
             planner_rows, _ = evaluate_planners(("noma", "oma"), budget)
             summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
+            summary = tables.add_planner_fractions(summary, BEST_PLANNER, SHORTEST_PATH_PLANNER)
             title = (
                 f"DDPG vs DT-DPG ({budget.name} budget, {hyperparams} hyperparameters, {observation} observation, "
                 "radio-map training)"

@@ -23,6 +23,7 @@ from sb3_dtdpg.experiments.aggregate import iqm, stratified_bootstrap_ci
 __all__ = [
     "ALGO_LABELS",
     "PAPER_MQI_SCALE",
+    "add_planner_fractions",
     "format_ci",
     "format_markdown",
     "format_paired_markdown",
@@ -193,6 +194,26 @@ def planner_row(name: str, multiple_access: str, result: EvaluationResult) -> di
     return row
 
 
+def add_planner_fractions(summary: pd.DataFrame, best: str, shortest: str) -> pd.DataFrame:
+    """
+    Every row's test MQI as a fraction of two planners' in the same mode: ``mqi_of_best`` (the best planner)
+    and ``mqi_of_shortest`` (the shortest-path planner); ``mqi_gap`` is ``mqi_bound - mqi`` where a row has an
+    upper bound (the best planner's, on the radio-map channel).
+
+    :param summary: a summary with planner rows (``algorithm`` labels ``best`` and ``shortest``)
+    :param best: label of the best planner's rows
+    :param shortest: label of the shortest-path planner's rows
+    :return: the summary with the new columns (NaN where a mode has no such planner row)
+    """
+    summary = summary.copy()
+    for column, label in (("mqi_of_best", best), ("mqi_of_shortest", shortest)):
+        reference = summary[summary["algorithm"] == label].set_index("multiple_access")["mqi"]
+        summary[column] = summary["mqi"] / summary["multiple_access"].map(reference).astype(float)
+    if "mqi_bound" in summary:
+        summary["mqi_gap"] = summary["mqi_bound"] - summary["mqi"]
+    return summary
+
+
 def _add_iqm(row: dict[str, Any], mqi: np.ndarray) -> None:
     row["mqi_iqm"] = iqm(mqi)
     row["mqi_iqm_low"], row["mqi_iqm_high"] = stratified_bootstrap_ci(mqi)
@@ -244,6 +265,17 @@ def table_notes(summary: pd.DataFrame) -> list[str]:
         "mean ± 95 % CI (t-interval over seeds; planners: over test episodes); n/a: one sample, no CI",
         "MQI IQM: interquartile mean with a 95 % stratified-bootstrap CI (rliable's method), same samples",
     ]
+    if "mqi_of_best" in summary:
+        notes.append(
+            "of best, of shortest: the test MQI over the best planner's and over the shortest-path planner's in the same "
+            "mode (best planner: a joint search over candidate paths with the best power split per step; shortest-path "
+            "planner: the shortest paths with the best power split per step)"
+        )
+    if "mqi_bound" in summary:
+        notes.append(
+            "Bound (gap): an upper bound on the MQI of any policy on these missions with the radio-map channel "
+            "(each robot alone with the whole AP power), and the bound minus the row's MQI"
+        )
     scales = _scales(summary)
     if "paper_mqi" in summary and any(s != PAPER_MQI_SCALE for s in scales):
         ours = ", ".join(f"{s:g}" for s in scales)
@@ -276,6 +308,11 @@ def _display(summary: pd.DataFrame, columns: Sequence[str]) -> tuple[list[str], 
         "Mission time",
         "Train steps",
     ]
+    fractions = "mqi_of_best" in summary and "mqi_of_shortest" in summary
+    if fractions:
+        header += ["of best", "of shortest"]
+    if "mqi_bound" in summary:
+        header.append("Bound (gap)")
     if "paper_mqi" in summary:
         header.append(f"Paper MQI (mall, of {PAPER_MQI_SCALE:g})")
     body = []
@@ -292,10 +329,22 @@ def _display(summary: pd.DataFrame, columns: Sequence[str]) -> tuple[list[str], 
                 format_ci(row["outage_steps"], row["outage_steps_ci"]),
                 format_ci(row["mission_time"], row["mission_time_ci"]),
                 "-" if not np.isfinite(steps) else f"{steps:,.0f}",
+                *([_ratio(row["mqi_of_best"]), _ratio(row["mqi_of_shortest"])] if fractions else []),
+                *([_bound(row["mqi_bound"], row.get("mqi_gap", math.nan))] if "mqi_bound" in summary else []),
                 *([_plain(row["paper_mqi"])] if "paper_mqi" in summary else []),
             ]
         )
     return header, body
+
+
+def _ratio(value: float) -> str:
+    return f"{value:.3f}" if value is not None and np.isfinite(value) else "-"
+
+
+def _bound(bound: float, gap: float) -> str:
+    if bound is None or not np.isfinite(bound):
+        return "-"
+    return f"{bound:.1f} ({gap:+.1f})" if gap is not None and np.isfinite(gap) else f"{bound:.1f}"
 
 
 def _plain(value: float) -> str:

@@ -1,0 +1,108 @@
+"""The margins that make a room pose the paper's problem (docs/SCENARIOS.md, "mall design"), on its test missions.
+
+For each channel (the radio map and Rayleigh fading) and multiple-access mode, the MQI of the best planner
+(:class:`noma_radiomap.planners.ReferencePlanner`), of the shortest-path planner with the best power split per
+step and with an equal split, and, on the radio-map channel, the mean upper bound
+(:func:`noma_radiomap.planners.mqi_upper_bound`) with the best planner's optimality gap. Then the two margins
+the default room is calibrated for:
+
+- path design: best planner - shortest-path planner (best power), NOMA, >= 15 MQI;
+- NOMA: the best planner's NOMA - its OMA, >= 25 MQI;
+
+and, on the radio-map channel, the smallest per-mission difference best - shortest-path (never negative).
+The test missions are those of ``sb3-dtdpg compare``: episode ``i`` reset with seed ``10000 + i``.
+
+Usage::
+
+    python benchmarks/room_calibration.py [--scenario mall] [--episodes 20] [--seed 10000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import noma_radiomap  # noqa: F401  (registers the envs)
+from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, mqi_upper_bound
+from sb3_dtdpg.evaluation import evaluate
+
+MIN_PATH_MARGIN = 15.0
+MIN_NOMA_MARGIN = 25.0
+
+
+def measure(scenario: str = "mall", episodes: int = 20, seed: int = 10_000) -> dict[str, dict[str, float]]:
+    """
+    :param scenario: scenario name or path
+    :param episodes: test missions
+    :param seed: seed of the first test mission
+    :return: per channel, the MQIs (``"<planner> <mode>"``), ``bound <mode>``, the margins and ``min_difference``
+    """
+    best = ReferencePlanner()  # one instance: its candidate rollouts are shared by the modes and channels
+    figures: dict[str, dict[str, float]] = {}
+    for channel in ("radio_map", "rayleigh"):
+        row: dict[str, float] = {}
+        for mode in ("noma", "oma"):
+            env = gym.make("NomaRadioMap-v0", scenario=scenario, channel=channel, multiple_access=mode)
+            results = {
+                "best": evaluate(best, env, n_episodes=episodes, seed=seed),
+                "shortest": evaluate(ShortestPathPlanner(power="best"), env, n_episodes=episodes, seed=seed),
+                "equal": evaluate(ShortestPathPlanner(), env, n_episodes=episodes, seed=seed),
+            }
+            for name, result in results.items():
+                row[f"{name} {mode}"] = result.mqi_mean
+            if channel == "radio_map":
+                differences = [
+                    b["mqi"] - s["mqi"] for b, s in zip(results["best"].episodes, results["shortest"].episodes, strict=True)
+                ]
+                row[f"min_difference {mode}"] = float(min(differences))
+                base, bounds = env.unwrapped, []
+                for episode in range(episodes):
+                    env.reset(seed=seed + episode)
+                    bounds.append(mqi_upper_bound(base, base.positions, base.destinations))
+                row[f"bound {mode}"] = float(np.mean(bounds))
+            env.close()
+        row["path_margin"] = row["best noma"] - row["shortest noma"]
+        row["noma_margin"] = row["best noma"] - row["best oma"]
+        figures[channel] = row
+    return figures
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", default="mall")
+    parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=10_000)
+    args = parser.parse_args()
+    start = time.perf_counter()
+    figures = measure(args.scenario, args.episodes, args.seed)
+    print(f"{args.scenario}: {args.episodes} test missions (seeds {args.seed}..{args.seed + args.episodes - 1})")
+    for channel, row in figures.items():
+        print(f"\n{channel} channel")
+        print(f"  {'mode':5} {'best':>7} {'shortest (best power)':>22} {'shortest (equal)':>17} {'bound (gap)':>16}")
+        for mode in ("noma", "oma"):
+            bound = (
+                f"{row[f'bound {mode}']:.1f} ({row[f'bound {mode}'] - row[f'best {mode}']:.1f})"
+                if f"bound {mode}" in row
+                else "-"
+            )
+            print(
+                f"  {mode.upper():5} {row[f'best {mode}']:7.1f} {row[f'shortest {mode}']:22.1f} "
+                f"{row[f'equal {mode}']:17.1f} {bound:>16}"
+            )
+        print(
+            f"  path design margin (best - shortest path, NOMA): {row['path_margin']:+.1f} (bar {MIN_PATH_MARGIN:g}); "
+            f"NOMA margin (best NOMA - best OMA): {row['noma_margin']:+.1f} (bar {MIN_NOMA_MARGIN:g})"
+        )
+        if "min_difference noma" in row:
+            print(
+                f"  smallest per-mission best - shortest path: NOMA {row['min_difference noma']:+.1f}, "
+                f"OMA {row['min_difference oma']:+.1f}"
+            )
+    print(f"\n({time.perf_counter() - start:.1f} s)")
+
+
+if __name__ == "__main__":
+    main()

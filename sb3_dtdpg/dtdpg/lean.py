@@ -1,0 +1,306 @@
+"""
+Lean training step and acting path of DT-DPG: the same math as SB3's TD3/DDPG ``train()`` and
+``_sample_action()``, in fewer Python-level operations.
+
+Every floating-point operation, every draw of the random generators and every Adam update of SB3's generic path
+happens here too, in the same order, so the parameters, batch-norm statistics and optimizer states are
+bit-identical to it (``tests/test_lean_step.py``). What is left out is work that changes no number: gradients of
+the critic's weights in the actor loss (:func:`torch.autograd.grad` with respect to the actor's parameters only),
+the per-call bookkeeping of ``Optimizer.step`` (the fused Adam kernel is applied to the optimizer's own state),
+one in-place kernel per tensor in the Polyak updates (``torch._foreach_*``), and the checks and copies of
+``predict`` when acting.
+"""
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3 import DDPG, TD3
+from stable_baselines3.common.noise import ActionNoise
+from stable_baselines3.common.preprocessing import is_image_space
+from torch.nn import functional as F
+
+#: Name of the model attribute holding the lean path's caches (excluded from saving).
+CACHE_ATTRIBUTE = "_lean_cache"
+
+
+class FusedAdamStep:
+    """
+    One fused Adam step applied to a ``torch.optim.Adam(fused=True)`` optimizer's own state (its ``step``,
+    ``exp_avg`` and ``exp_avg_sq`` tensors), given the gradients: the kernel ``Adam.step`` runs, without its
+    per-call bookkeeping. Any other optimizer (or set-up: several parameter groups, AMSGrad, hooks, a state not
+    yet created) goes through ``optimizer.step()`` with the gradients set on the parameters.
+
+    :param optimizer: The optimizer whose parameters and state are updated
+    """
+
+    def __init__(self, optimizer: th.optim.Optimizer):
+        self.optimizer = optimizer
+        self.params: list[th.Tensor] = [p for group in optimizer.param_groups for p in group["params"]]
+        self._state: Any = None
+        self._tensors: tuple[list[th.Tensor], list[th.Tensor], list[th.Tensor]] | None = None
+
+    def _fusable(self) -> bool:
+        optimizer = self.optimizer
+        if type(optimizer) is not th.optim.Adam or len(optimizer.param_groups) != 1:
+            return False
+        group = optimizer.param_groups[0]
+        if not group.get("fused") or group.get("amsgrad") or group.get("capturable") or group.get("differentiable"):
+            return False
+        if group.get("decoupled_weight_decay") or getattr(optimizer, "grad_scale", None) is not None:
+            return False
+        if optimizer._optimizer_step_pre_hooks or optimizer._optimizer_step_post_hooks:
+            return False
+        from torch.optim import optimizer as optimizer_module
+
+        if getattr(optimizer_module, "_global_optimizer_pre_hooks", None) or getattr(
+            optimizer_module, "_global_optimizer_post_hooks", None
+        ):
+            return False
+        return all(p in optimizer.state and "exp_avg" in optimizer.state[p] for p in self.params)
+
+    def _state_tensors(self) -> tuple[list[th.Tensor], list[th.Tensor], list[th.Tensor]] | None:
+        # load_state_dict() replaces optimizer.state: the cached tensors are those of the current state object
+        if self._state is not self.optimizer.state or self._tensors is None:
+            if not self._fusable():
+                return None
+            state = self.optimizer.state
+            self._tensors = (
+                [state[p]["exp_avg"] for p in self.params],
+                [state[p]["exp_avg_sq"] for p in self.params],
+                [state[p]["step"] for p in self.params],
+            )
+            self._state = state
+        return self._tensors
+
+    def step(self, grads: tuple[th.Tensor | None, ...]) -> None:
+        """
+        Update the parameters with their gradients.
+
+        :param grads: One gradient per parameter, in the order of the optimizer's parameters (None: unused)
+        """
+        tensors = self._state_tensors() if all(g is not None for g in grads) else None
+        if tensors is None:
+            self.optimizer.zero_grad()
+            for param, grad in zip(self.params, grads, strict=True):
+                param.grad = grad
+            self.optimizer.step()
+            self._tensors = None  # the first step creates the state
+            return
+        exp_avgs, exp_avg_sqs, steps = tensors
+        group = self.optimizer.param_groups[0]
+        beta1, beta2 = group["betas"]
+        with th.no_grad():
+            th._foreach_add_(steps, 1)
+            th._fused_adam_(
+                self.params,
+                list(grads),  # type: ignore[arg-type]
+                exp_avgs,
+                exp_avg_sqs,
+                [],
+                steps,
+                amsgrad=False,
+                lr=group["lr"],
+                beta1=beta1,
+                beta2=beta2,
+                weight_decay=group["weight_decay"],
+                eps=group["eps"],
+                maximize=group["maximize"],
+                grad_scale=None,
+                found_inf=None,
+            )
+
+
+class LeanTrainer:
+    """
+    The tensors and helpers one model's lean step needs, built once per set of networks and optimizers (a new
+    policy, from ``_setup_model``, ``reinitialize`` or ``load``, makes a new one; :class:`FusedAdamStep` follows a
+    loaded optimizer state).
+
+    :param model: A TD3/DDPG model (``actor``, ``critic``, their targets and optimizers, batch-norm statistics)
+    """
+
+    def __init__(self, model: Any):
+        self.owners = self._owners(model)
+        self.actor_adam = FusedAdamStep(model.actor.optimizer)
+        self.critic_adam = FusedAdamStep(model.critic.optimizer)
+        # The gradients are those of the parameters each optimizer updates
+        self.actor_params = self.actor_adam.params
+        self.critic_params = self.critic_adam.params
+        # SB3 Polyak-updates the critic, then the actor (tau), then copies the critic's and the actor's batch-norm
+        # statistics (tau = 1): one pass of foreach kernels per run of these groups that touches each target once (a
+        # features extractor shared by actor and critic is updated twice, one after the other, as SB3 does)
+        groups = [
+            (list(model.critic.parameters()), list(model.critic_target.parameters()), False),
+            (list(model.actor.parameters()), list(model.actor_target.parameters()), False),
+            (list(model.critic_batch_norm_stats), list(model.critic_batch_norm_stats_target), True),
+            (list(model.actor_batch_norm_stats), list(model.actor_batch_norm_stats_target), True),
+        ]
+        self.passes: list[tuple[list[th.Tensor], list[th.Tensor], bool]] = []
+        for online, target, copy in groups:
+            if len(online) != len(target):
+                raise ValueError("the target networks do not match the online networks")
+            if not target:
+                continue
+            last = self.passes[-1] if self.passes else None
+            if last is not None and last[2] == copy and not {id(t) for t in target} & {id(t) for t in last[1]}:
+                last[0].extend(online)
+                last[1].extend(target)
+            else:
+                self.passes.append((list(online), list(target), copy))
+
+    @staticmethod
+    def _owners(model: Any) -> tuple[Any, ...]:
+        networks = (model.policy, model.actor, model.critic, model.actor_target, model.critic_target)
+        return (*networks, model.actor.optimizer, model.critic.optimizer)
+
+    def valid_for(self, model: Any) -> bool:
+        """:return: whether this cache was built for the model's current networks"""
+        return all(a is b for a, b in zip(self.owners, self._owners(model), strict=True))
+
+    def polyak(self, tau: float) -> None:
+        """SB3's ``polyak_update`` of the targets (``target = (1 - tau) * target + tau * online``), and the copy of the
+        batch-norm statistics (the same update with ``tau = 1``), one kernel per tensor."""
+        with th.no_grad():
+            for online, target, copy in self.passes:
+                weight = 1.0 if copy else tau
+                th._foreach_mul_(target, 1 - weight)
+                th._foreach_add_(target, online, alpha=weight)
+
+
+def lean_trainer(model: Any) -> LeanTrainer:
+    """:return: the model's :class:`LeanTrainer`, built anew when its networks changed"""
+    trainer = getattr(model, CACHE_ATTRIBUTE, None)
+    if trainer is None or not trainer.valid_for(model):
+        trainer = LeanTrainer(model)
+        setattr(model, CACHE_ATTRIBUTE, trainer)
+    return trainer
+
+
+def lean_train(model: Any, gradient_steps: int, batch_size: int) -> None:
+    """
+    SB3's TD3 ``train()`` (DDPG: TD3 with one critic, no target noise and no policy delay), the same math in
+    fewer operations (see the module docstring).
+
+    :param model: The TD3/DDPG model
+    :param gradient_steps: Number of gradient steps
+    :param batch_size: Minibatch size
+    """
+    trainer = lean_trainer(model)
+    model.policy.set_training_mode(True)
+    model._update_learning_rate([model.actor.optimizer, model.critic.optimizer])
+    actor, critic, actor_target, critic_target = model.actor, model.critic, model.actor_target, model.critic_target
+    single_critic = critic.n_critics == 1
+    actor_losses, critic_losses = [], []
+    for _ in range(gradient_steps):
+        model._n_updates += 1
+        data = model.replay_buffer.sample(batch_size, env=model._vec_normalize_env)
+        discounts = data.discounts if data.discounts is not None else model.gamma
+        with th.no_grad():
+            # The target noise is drawn as SB3 draws it (also when its scale is 0): the torch generator's stream
+            # stays the same
+            noise = th.empty_like(data.actions).normal_(0, model.target_policy_noise)
+            noise = noise.clamp(-model.target_noise_clip, model.target_noise_clip)
+            next_actions = (actor_target(data.next_observations) + noise).clamp(-1, 1)
+            next_q = critic_target(data.next_observations, next_actions)
+            next_q_values = next_q[0] if single_critic else th.cat(next_q, dim=1).min(dim=1, keepdim=True)[0]
+            target_q_values = data.rewards + (1 - data.dones) * discounts * next_q_values
+        current_q_values = critic(data.observations, data.actions)
+        if single_critic:
+            critic_loss = F.mse_loss(current_q_values[0], target_q_values)
+        else:
+            critic_loss = sum(F.mse_loss(current_q, target_q_values) for current_q in current_q_values)
+        critic_losses.append(critic_loss.item())
+        # allow_unused: a features extractor shared with the actor gets no gradient from the critic loss (SB3's Adam
+        # then skips it, as FusedAdamStep does)
+        trainer.critic_adam.step(th.autograd.grad(critic_loss, trainer.critic_params, allow_unused=True))
+
+        if model._n_updates % model.policy_delay == 0:
+            actor_loss = -critic.q1_forward(data.observations, actor(data.observations)).mean()
+            actor_losses.append(actor_loss.item())
+            trainer.actor_adam.step(th.autograd.grad(actor_loss, trainer.actor_params, allow_unused=True))
+            trainer.polyak(model.tau)
+
+    model.logger.record("train/n_updates", model._n_updates, exclude="tensorboard")
+    if len(actor_losses) > 0:
+        model.logger.record("train/actor_loss", np.mean(actor_losses))
+    model.logger.record("train/critic_loss", np.mean(critic_losses))
+
+
+def fast_actable(observation_space: spaces.Space) -> bool:
+    """:return: whether :func:`policy_action` can act on observations of this space (vector or dict of vectors)"""
+    if isinstance(observation_space, spaces.Dict):
+        return all(isinstance(s, spaces.Box) and not is_image_space(s) for s in observation_space.spaces.values())
+    return isinstance(observation_space, spaces.Box) and not is_image_space(observation_space)
+
+
+def policy_action(model: Any, observation: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+    """
+    The actions ``model.predict(observation, deterministic=False)`` returns for a vectorized observation of a
+    :func:`fast_actable` space, computed without its checks and copies (under ``inference_mode``); the policy must
+    be in evaluation mode, as it is while SB3 collects rollouts.
+
+    :param model: The TD3/DDPG model
+    :param observation: The vectorized observation (one row per env)
+    :return: The actions, in the action space's bounds, one row per env
+    """
+    policy = model.policy
+    device = policy.device
+    if isinstance(observation, dict):
+        obs: th.Tensor | dict[str, th.Tensor] = {key: th.as_tensor(value, device=device) for key, value in observation.items()}
+    else:
+        obs = th.as_tensor(observation, device=device)
+    with th.inference_mode():
+        actions = model.actor(obs)
+    actions = actions.cpu().numpy().reshape((-1, *model.action_space.shape))
+    return (
+        policy.unscale_action(actions)
+        if policy.squash_output
+        else np.clip(actions, model.action_space.low, model.action_space.high)
+    )
+
+
+class LeanStep:
+    """
+    Mixin for SB3's TD3 and its subclasses (DDPG, DTDPG): ``train()`` is :func:`lean_train` and, after the warm-up,
+    ``_sample_action()`` acts through :func:`policy_action`, both bit-identical to SB3's; with ``lean = False``
+    (an instance attribute) the model uses SB3's generic ones. The caches are not saved with the model.
+    """
+
+    #: Train and act with the lean step (False: SB3's generic ``train()`` and ``_sample_action()``)
+    lean: bool = True
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        if not self.lean:
+            super().train(gradient_steps, batch_size)  # type: ignore[misc]
+            return
+        lean_train(self, gradient_steps, batch_size)
+
+    def _sample_action(
+        self,
+        learning_starts: int,
+        action_noise: ActionNoise | None = None,
+        n_envs: int = 1,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        model: Any = self
+        if not self.lean or model.num_timesteps < learning_starts or not fast_actable(model.observation_space):
+            return super()._sample_action(learning_starts, action_noise, n_envs)  # type: ignore[misc]
+        assert model._last_obs is not None, "self._last_obs was not set"
+        model.policy.set_training_mode(False)  # a no-op while collecting rollouts
+        # What SB3 does with predict()'s actions: rescale to [-1, 1], add the noise, store the scaled action
+        scaled_action = model.policy.scale_action(policy_action(model, model._last_obs))
+        if action_noise is not None:
+            scaled_action = np.clip(scaled_action + action_noise(), -1, 1)
+        return model.policy.unscale_action(scaled_action), scaled_action
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), CACHE_ATTRIBUTE]  # type: ignore[misc]
+
+
+class LeanDDPG(LeanStep, DDPG):
+    """SB3's DDPG with the lean training step and acting path: the same parameters bit for bit, faster on CPU."""
+
+
+class LeanTD3(LeanStep, TD3):
+    """SB3's TD3 with the lean training step and acting path: the same parameters bit for bit, faster on CPU."""
