@@ -1,18 +1,30 @@
-"""sb3-dtdpg: DT-DPG (deep transfer deterministic policy gradient) for Stable-Baselines3."""
+"""sb3-dtdpg: DT-DPG (deep transfer deterministic policy gradient) for Stable-Baselines3.
 
+The public names are imported on first use (PEP 562), so that ``import sb3_dtdpg.cli`` (``sb3-dtdpg --help``)
+does not import torch and Stable-Baselines3.
+"""
+
+from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
-
-from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
-from sb3_dtdpg.common.noise import LinearDecayOUNoise
-from sb3_dtdpg.common.phases import Phase
-from sb3_dtdpg.dtdpg import DTDPG, CnnPolicy, MlpPolicy, MultiInputPolicy
-from sb3_dtdpg.missions import MissionLoggerCallback
-from sb3_dtdpg.presets import preset
+from typing import Any
 
 try:
     __version__ = version("sb3-dtdpg")
 except PackageNotFoundError:  # a source tree on sys.path, not installed
     __version__ = "0+unknown"
+
+#: Where each public name lives.
+_EXPORTS = {
+    "DTDPG": "sb3_dtdpg.dtdpg",
+    "CnnPolicy": "sb3_dtdpg.dtdpg",
+    "MlpPolicy": "sb3_dtdpg.dtdpg",
+    "MultiInputPolicy": "sb3_dtdpg.dtdpg",
+    "CurriculumTransferCallback": "sb3_dtdpg.common.callbacks",
+    "LinearDecayOUNoise": "sb3_dtdpg.common.noise",
+    "Phase": "sb3_dtdpg.common.phases",
+    "MissionLoggerCallback": "sb3_dtdpg.missions",
+    "preset": "sb3_dtdpg.presets",
+}
 
 __all__ = [
     "DTDPG",
@@ -26,3 +38,15 @@ __all__ = [
     "__version__",
     "preset",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'sb3_dtdpg' has no attribute {name!r}")
+    value = getattr(import_module(_EXPORTS[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

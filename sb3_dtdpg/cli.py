@@ -7,18 +7,26 @@ Subcommands:
   the NomaRadioMap envs with periodic checkpoints (the same command resumes it);
 - ``compare``: the main job: DT-DPG vs DDPG in NOMA and OMA, several seeds in parallel, the results
   table (printed, Markdown, CSV) with the planners as references, learning curves and trajectories;
-- ``reproduce``: every experiment of the paper's Section V, resumable.
+- ``reproduce``: every experiment of the paper's Section V, resumable;
+- ``evaluate``: a saved model on the test missions (the paper's 20 Rayleigh episodes), the table of ``compare``;
+- ``enjoy``: one mission of a saved model, printed, or ``--record``-ed as a GIF/MP4 (headless).
 
 Conventions: ``--out`` is always an output *folder* (created if missing); ``--n-seeds`` is a number of seeds,
 ``--seed`` the seed of one run; ``--multiple-access`` takes the mode(s), ``noma`` and/or ``oma``. A user error
-(an unknown scenario or env id, a bad YAML file, a budget that cannot train) is one ``error:`` line after the
-usage, with exit status 2, as argparse reports a bad option.
+(an unknown scenario or env id, a bad YAML file, a budget that cannot train, a seed or learning rate out of
+range, a folder in use by another job) is one ``error:`` line after the subcommand's usage, with exit status 2,
+as argparse reports a bad option, before anything is created. Abbreviated options are not accepted.
+
+``--preset`` picks a hyperparameter set (``tuned``, ``paper``); ``--hyperparams key:value ...`` overrides single
+values, as in the RL Zoo. ``sb3-dtdpg --help`` imports neither torch nor Stable-Baselines3: the commands import
+what they need when they run.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import re
 import sys
@@ -28,15 +36,28 @@ from typing import Any
 
 __all__ = ["build_parser", "main"]
 
-_PUBLIC_BUDGETS = ("tiny", "default", "small", "reduced", "paper")
-_HYPERPARAMS_HELP = (
-    "tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; the default); "
-    "paper: Table I (the default of td3, sac and tqc, which have no tuned set)"
+# The choices of the options, spelled here so that --help needs no heavy import (tests/test_cli_errors.py checks
+# them against sb3_dtdpg.baselines and noma_radiomap.registration).
+_ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
+_PRESETS = ("paper", "tuned")
+_OBSERVATIONS = ("goal", "destinations", "paper")
+_DEFAULT_ENV_ID = "NomaRadioMap-v0"
+_PRESET_HELP = (
+    "hyperparameter set. tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; "
+    "the default); paper: Table I (the default of td3, sac and tqc, which have no tuned set)"
+)
+_OVERRIDES_HELP = (
+    "override single hyperparameters, RL Zoo style: key:value ... (e.g. learning_rate:3e-4 batch_size:256 "
+    "policy_kwargs:'dict(net_arch=[64, 64])'); values are Python literals"
 )
 _MODES = ("noma", "oma")
+#: Seeds go to numpy and torch, which take 0 <= seed < 2**32.
+_MAX_SEED = 2**32 - 1
 _OBSERVATION_HELP = (
-    "goal: the paper's state plus each robot's direction and distance to its destination (an extension, "
-    "docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget); paper: the paper's state only"
+    "goal: each robot's position, destination, channel gain and arrived flag plus its direction and distance to "
+    "its destination (an extension, docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget; "
+    "the default everywhere); destinations: the same without direction and distance; paper: the paper's state, "
+    "Eq. (24), position and gain only (for the paper's task, fixed destinations)"
 )
 
 
@@ -49,16 +70,47 @@ def _user_errors(args: argparse.Namespace) -> Iterator[None]:
         args.error(str(error))
 
 
+def _busy_folder_errors(args: argparse.Namespace) -> contextlib.AbstractContextManager[None]:
+    """A folder in use by another job (``OutputBusyError``) as a usage error of the subcommand."""
+    from sb3_dtdpg.experiments.runs import OutputBusyError
+
+    @contextlib.contextmanager
+    def guard() -> Iterator[None]:
+        try:
+            yield
+        except OutputBusyError as error:
+            args.error(str(error))
+
+    return guard()
+
+
+def _split_hyperparams(args: argparse.Namespace) -> None:
+    """
+    ``--hyperparams`` holds ``key:value`` overrides; a lone preset name there (the old meaning) is taken as
+    ``--preset`` with a deprecation warning. Sets ``args.preset`` and ``args.overrides``.
+    """
+    from sb3_dtdpg.overrides import parse_overrides
+
+    items = list(getattr(args, "hyperparams", None) or [])
+    if len(items) == 1 and items[0] in _PRESETS:
+        if args.preset is not None and args.preset != items[0]:
+            args.error(f"--hyperparams {items[0]} and --preset {args.preset}: give the preset once, with --preset")
+        print(f"{args.prog}: warning: --hyperparams {items[0]} is deprecated, use --preset {items[0]}", file=sys.stderr)
+        args.preset, items = items[0], []
+    with _user_errors(args):
+        args.overrides = parse_overrides(items)
+
+
 def _hyperparams(args: argparse.Namespace, algos: Sequence[str]) -> str:
-    """The hyperparameter set of a command: ``--hyperparams``, else ``tuned`` where every algorithm has it."""
-    if args.hyperparams is not None:
-        return args.hyperparams
+    """The hyperparameter set of a command: ``--preset``, else ``tuned`` where every algorithm has it."""
+    _split_hyperparams(args)
+    if args.preset is not None:
+        return args.preset
     if all(algo in ("dtdpg", "ddpg") for algo in algos):
         return "tuned"
     if len(algos) > 1:
         print(
-            f"{args.prog}: note: --hyperparams paper (Table I) for every algorithm, as {', '.join(algos)} have no "
-            "common tuned set",
+            f"{args.prog}: note: --preset paper (Table I) for every algorithm, as {', '.join(algos)} have no common tuned set",
             file=sys.stderr,
         )
     return "paper"
@@ -105,12 +157,18 @@ def _train_env(args: argparse.Namespace) -> tuple[Any, bool]:
 def _cmd_train(args: argparse.Namespace) -> int:
     import torch as th
 
-    from sb3_dtdpg.baselines import check_hyperparams, check_training_budget, hyperparameter
+    from sb3_dtdpg.baselines import algorithm_class, check_hyperparams, check_training_budget, hyperparameter
+    from sb3_dtdpg.overrides import check_constructor_kwargs
 
     args.hyperparams = _hyperparams(args, [args.algo])
     args.tb = args.tb or str(Path(args.out) / "tb")  # a run's logs live with its results, under its lock
     with _user_errors(args):
         check_hyperparams(args.algo, args.hyperparams)
+        check_constructor_kwargs(algorithm_class(args.algo), args.overrides, " (--hyperparams)")
+    if "learning_rate" in args.overrides:
+        if args.learning_rate is not None:
+            args.error("--learning-rate and --hyperparams learning_rate:...: give the learning rate once")
+        args.learning_rate = args.overrides.pop("learning_rate")
     if args.threads:
         th.set_num_threads(args.threads)
     env, mission = _train_env(args)
@@ -122,7 +180,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
     else:
         total, budget = args.episodes * max_steps, f"--episodes {args.episodes} (at most {args.episodes * max_steps} steps)"
     with _user_errors(args):
-        learning_starts = int(hyperparameter(args.algo, "learning_starts", args.hyperparams))
+        learning_starts = int(
+            args.overrides.get("learning_starts", hyperparameter(args.algo, "learning_starts", args.hyperparams))
+        )
         check_training_budget(total, learning_starts, budget, "give more --episodes or --timesteps")
     if mission:
         multiple_access, channel = env.unwrapped.multiple_access, env.unwrapped.channel
@@ -150,11 +210,12 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
         hyperparams=args.hyperparams,
         timesteps=args.timesteps,
         observation=args.observation,
+        overrides=tuple((name, repr(value)) for name, value in args.overrides.items()),
     )
     out = Path(args.out)
     run_dir = out / "runs" / spec.run_id
     try:
-        with output_lock(out, f".{spec.run_id}.lock"):
+        with _busy_folder_errors(args), output_lock(out, f".{spec.run_id}.lock"):
             result = run_one(
                 spec,
                 out,
@@ -202,6 +263,7 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
         learning_rate=args.learning_rate,
         verbose=args.verbose,
         hyperparams=args.hyperparams,
+        **args.overrides,
     )
     callbacks = [EpisodeReturnLogger(), *mission_callbacks(model)]
     if args.timesteps is not None:
@@ -228,7 +290,7 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
 def _cmd_compare(args: argparse.Namespace) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     from sb3_dtdpg.baselines import check_hyperparams, is_mission_env
-    from sb3_dtdpg.experiments.compare import compare_specs, run_compare
+    from sb3_dtdpg.experiments.compare import compare_specs
     from sb3_dtdpg.experiments.runs import BUDGETS, check_budget
 
     if not is_mission_env(args.env):
@@ -245,6 +307,14 @@ def _cmd_compare(args: argparse.Namespace) -> int:
             budget, n_seeds, args.algos, args.multiple_access, args.env, args.hyperparams, args.observation
         ):
             check_budget(spec)
+    with _busy_folder_errors(args):
+        _run_compare(args)
+    return 0
+
+
+def _run_compare(args: argparse.Namespace) -> None:
+    from sb3_dtdpg.experiments.compare import run_compare
+
     run_compare(
         args.out,
         scenario=args.scenario,
@@ -258,13 +328,12 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         hyperparams=args.hyperparams,
         observation=args.observation,
     )
-    return 0
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     from sb3_dtdpg.baselines import check_hyperparams
-    from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
+    from sb3_dtdpg.experiments.reproduce import reproduce_specs
     from sb3_dtdpg.experiments.runs import BUDGETS, check_budget
 
     budget = BUDGETS[args.budget]
@@ -276,6 +345,21 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             for specs in reproduce_specs(budget, n_seeds, args.hyperparams, args.observation).values():
                 for spec in specs:
                     check_budget(spec)
+    with _busy_folder_errors(args):
+        _run_reproduce(args)
+    if args.budget != "paper":
+        paper = BUDGETS["paper"]
+        print(
+            f"This was the {args.budget!r} budget ({budget.episodes} training episodes per run). The paper's scale "
+            f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; about an hour on 2 cores): "
+            f"sb3-dtdpg reproduce --budget paper --out <folder>"
+        )
+    return 0
+
+
+def _run_reproduce(args: argparse.Namespace) -> None:
+    from sb3_dtdpg.experiments.reproduce import run_reproduce
+
     run_reproduce(
         args.out,
         budget=args.budget,
@@ -287,13 +371,88 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         observation=args.observation,
         experiments=args.experiments,
     )
-    if args.budget != "paper":
-        paper = BUDGETS["paper"]
-        print(
-            f"This was the {args.budget!r} budget ({budget.episodes} training episodes per run). The paper's scale "
-            f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; about an hour on 2 cores): "
-            f"sb3-dtdpg reproduce --budget paper --out <folder>"
-        )
+
+
+def _saved_model_env(args: argparse.Namespace, channel: str, render: bool = False) -> tuple[Any, Any, dict[str, Any]]:
+    """The saved model of ``evaluate``/``enjoy``, its test env (its recorded settings unless overridden) and the settings."""
+    import gymnasium as gym
+
+    import noma_radiomap  # noqa: F401  (registers the env ids)
+    from sb3_dtdpg.model_files import read_saved_model
+
+    with _user_errors(args):
+        saved = read_saved_model(args.model, args.algo)
+        settings = dict(saved.settings or {})
+        kwargs: dict[str, Any] = {"channel": channel}
+        for key, value in (
+            ("scenario", args.scenario or settings.get("scenario")),
+            ("observation", args.observation or settings.get("observation") or "goal"),
+            ("multiple_access", args.multiple_access or settings.get("multiple_access")),
+            ("task", settings.get("task")),
+        ):
+            if value is not None:
+                kwargs[key] = value
+        env_id = args.env or saved.env_id or _DEFAULT_ENV_ID
+        env = gym.make(env_id, **kwargs)
+        try:
+            model = saved.load(env)
+        except ValueError:
+            env.close()
+            raise
+    return model, env, {**settings, **kwargs, "env_id": env_id, "algo": saved.algo}
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    import json
+
+    import pandas as pd
+
+    from sb3_dtdpg.evaluation import evaluate
+    from sb3_dtdpg.experiments import tables
+
+    model, env, settings = _saved_model_env(args, args.channel)
+    with _user_errors(args):
+        result = evaluate(model, env, n_episodes=args.n_episodes, seed=args.seed, deterministic=True)
+    env.close()
+    mode = str(settings.get("multiple_access", "noma"))
+    row = tables.planner_row(tables.ALGO_LABELS.get(settings["algo"], settings["algo"]), mode, result)
+    summary = pd.DataFrame([row])
+    title = (
+        f"{args.model} on {settings.get('scenario', 'mall')} ({mode.upper()}, {settings['observation']} observation): "
+        f"{result.n_episodes} {args.channel} test episodes from seed {args.seed}"
+    )
+    tables.print_table(summary, title)
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        document = {"model": str(args.model), "settings": settings, "summary": result.summary(), "episodes": result.episodes}
+        Path(args.json).write_text(json.dumps(document, indent=2, default=float) + "\n")
+        print(f"wrote {args.json}")
+    if args.csv:
+        Path(args.csv).parent.mkdir(parents=True, exist_ok=True)
+        pd.DataFrame(result.episodes).to_csv(args.csv, index=False)
+        print(f"wrote {args.csv} (one row per test episode)")
+    return 0
+
+
+def _cmd_enjoy(args: argparse.Namespace) -> int:
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    from sb3_dtdpg.recording import run_mission, save_animation
+
+    model, env, settings = _saved_model_env(args, args.channel)
+    trace = run_mission(model, env, args.seed)
+    info = trace.info
+    arrived = "all robots arrived" if info.get("is_success") else "not all robots arrived"
+    outage = [int(steps) for steps in info.get("outage_steps", [])]
+    print(
+        f"mission (seed {args.seed}, {settings.get('scenario', 'mall')}, {str(settings.get('multiple_access')).upper()}, "
+        f"{args.channel}): {len(trace.power_w)} steps, {arrived}, MQI {float(info.get('mqi', float('nan'))):.1f}, "
+        f"outage steps per robot {outage}"
+    )
+    if args.record:
+        with _user_errors(args):
+            frames = save_animation(env, trace, args.record, fps=args.fps, max_frames=args.max_frames)
+        print(f"wrote {args.record} ({frames} frames)")
+    env.close()
     return 0
 
 
@@ -305,31 +464,66 @@ def _replace(budget: Any, **changes: Any) -> Any:
 
 # ---------------------------------------------------------------------------------------------- argument types
 def _budget(value: str) -> str:
-    from sb3_dtdpg.experiments.runs import BUDGETS
+    from sb3_dtdpg.experiments.budgets import BUDGET_ALIASES, BUDGETS, PUBLIC_BUDGETS
 
     if value not in BUDGETS:
-        raise argparse.ArgumentTypeError(f"budget must be one of {', '.join(_PUBLIC_BUDGETS)}, got {value!r}")
+        raise argparse.ArgumentTypeError(f"budget must be one of {', '.join(PUBLIC_BUDGETS)}, got {value!r}")
+    if value in BUDGET_ALIASES:
+        print(f"sb3-dtdpg: warning: --budget {value} is deprecated, use --budget {BUDGET_ALIASES[value]}", file=sys.stderr)
+        value = BUDGET_ALIASES[value]
     return value
 
 
-def _positive(value: str) -> int:
-    try:
-        number = int(value)
-    except ValueError:
-        number = 0
-    if number < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value!r}")
-    return number
+def _checked(convert: Any, valid: Any, expected: str) -> Any:
+    """An argparse type: ``convert(text)``, refused with ``expected ..., got ...`` unless ``valid`` holds."""
+
+    def parse(value: str) -> Any:
+        try:
+            number = convert(value)
+        except ValueError:
+            number = None
+        if number is None or not valid(number):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {value!r}")
+        return number
+
+    return parse
+
+
+_seed = _checked(int, lambda n: 0 <= n <= _MAX_SEED, f"a seed in 0..{_MAX_SEED} (numpy's and torch's range)")
+_learning_rate = _checked(float, lambda x: math.isfinite(x) and x > 0, "a positive finite learning rate")
+_threads = _checked(int, lambda n: n >= 0, "0 (torch's default) or a positive number of threads")
+_positive = _checked(int, lambda n: n >= 1, "a positive integer")
+
+
+def _output_file(suffixes: tuple[str, ...]) -> Any:
+    def check(value: str) -> str:
+        if Path(value).suffix.lower() not in suffixes:
+            raise argparse.ArgumentTypeError(f"expected a {' or '.join(suffixes)} file, got {value!r}")
+        if Path(value).is_dir():
+            raise argparse.ArgumentTypeError(f"{value!r} is a folder, expected a file name")
+        return value
+
+    return check
 
 
 def _scenario(value: str) -> str:
-    """A built-in scenario name or a scenario YAML file, loaded (so validated) once while parsing."""
-    from noma_radiomap import load_scenario
+    """
+    A built-in scenario name or a scenario YAML file, loaded (so validated) once while parsing.
+
+    The rule (:func:`noma_radiomap.load_scenario`): a bare built-in name (``small``) is the built-in scenario;
+    write a path (``./small``, ``small.yaml``) for a file. A note says so when a file of that bare name exists.
+    """
+    from noma_radiomap import list_scenarios, load_scenario
 
     try:
         load_scenario(value)
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
+    if value in list_scenarios() and os.path.exists(value):
+        print(
+            f"sb3-dtdpg: note: --scenario {value} is the built-in scenario; for the file {value!r} here write ./{value}",
+            file=sys.stderr,
+        )
     return value
 
 
@@ -358,14 +552,26 @@ class _DeprecatedOption(argparse.Action):
         setattr(namespace, self.dest, values)
 
 
-def _budget_help(default: str) -> str:
-    from sb3_dtdpg.experiments.runs import BUDGETS
+class _HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, with the budgets' details filled in when help is shown (not when the parser is built)."""
 
-    scales = "; ".join(
-        f"{name}: {BUDGETS[name].episodes} episodes on {BUDGETS[name].scenario or 'mall'}, {BUDGETS[name].seeds} seeds"
-        for name in _PUBLIC_BUDGETS
-    )
-    return f"experiment scale (default: {default}). {scales}; paper is the paper's scale"
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help
+        if text and "%(budgets)s" in text:
+            from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS
+
+            budgets = "; ".join(
+                f"{name}: {BUDGETS[name].episodes} episodes on {BUDGETS[name].scenario or 'mall'}, "
+                f"{BUDGETS[name].seeds} seed{'s' if BUDGETS[name].seeds != 1 else ''}"
+                + (" (the paper's scale, about an hour on 2 cores: --budget paper)" if name == "paper" else "")
+                for name in PUBLIC_BUDGETS
+            )
+            text = text.replace("%(budgets)s", budgets)
+        return text
+
+
+def _budget_help(default: str) -> str:
+    return f"experiment scale (default: {default}). %(budgets)s"
 
 
 def _add_seeds(p: argparse.ArgumentParser) -> None:
@@ -377,66 +583,106 @@ def _add_seeds(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_common_run_options(p: argparse.ArgumentParser, hyperparams: tuple[str, ...]) -> None:
-    from noma_radiomap.registration import OBSERVATIONS
+def _add_hyperparameter_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP)
+    p.add_argument("--hyperparams", nargs="+", default=None, metavar="KEY:VALUE", help=_OVERRIDES_HELP)
 
-    p.add_argument("--hyperparams", choices=hyperparams, default=None, help=_HYPERPARAMS_HELP)
-    p.add_argument("--observation", choices=OBSERVATIONS, default="goal", help=_OBSERVATION_HELP + " (default: goal)")
+
+def _add_common_run_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP)
+    p.add_argument(  # compare and reproduce take whole presets: their run identities name the preset
+        "--hyperparams",
+        choices=_PRESETS,
+        dest="preset",
+        action=_DeprecatedOption,
+        replacement="--preset",
+        help=argparse.SUPPRESS,
+    )
+    p.add_argument("--observation", choices=_OBSERVATIONS, default="goal", help=_OBSERVATION_HELP + " (default: goal)")
     p.add_argument("--workers", type=_positive, default=None, help="parallel processes (default: number of CPUs)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars; a line per finished run instead")
+
+
+def _add_saved_model_options(p: argparse.ArgumentParser, seed_help: str) -> None:
+    p.add_argument("model", help="a model zip (train/compare: <out>/runs/<run id>/model.zip; the RL Zoo's; model.save's)")
+    p.add_argument(
+        "--algo", choices=_ALGORITHMS, default=None, help="the model's algorithm (default: from the run or the model file)"
+    )
+    p.add_argument("--env", type=_env_id, default=None, help=f"env id (default: the run's, else {_DEFAULT_ENV_ID})")
+    p.add_argument("--scenario", type=_scenario, default=None, help="scenario (default: the one the model was trained on)")
+    p.add_argument(
+        "--multiple-access", choices=_MODES, default=None, help="downlink mode (default: the one the model was trained on)"
+    )
+    p.add_argument(
+        "--observation", choices=_OBSERVATIONS, default=None, help="observation (default: the one the model was trained on)"
+    )
+    p.add_argument(
+        "--channel",
+        choices=("rayleigh", "radio_map"),
+        default="rayleigh",
+        help="test channel (default: rayleigh, the paper's random fading)",
+    )
+    p.add_argument("--seed", type=_seed, default=10_000, help=seed_help)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """:return: the argument parser of ``sb3-dtdpg``"""
-    from noma_radiomap.registration import OBSERVATIONS
+    """:return: the argument parser of ``sb3-dtdpg`` (built without importing torch or Stable-Baselines3)"""
     from sb3_dtdpg import __version__
-    from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID, HYPERPARAMS
 
     parser = argparse.ArgumentParser(
         prog="sb3-dtdpg",
         description="DT-DPG on the NOMA indoor radio-map environment. --out is always an output folder.",
         epilog="RL Zoo training (any zoo flag): python -m sb3_dtdpg.train --algo dtdpg --env NomaRadioMap-v0 (docs/ZOO.md)",
+        allow_abbrev=False,
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    names = "map,train,compare,reproduce,evaluate,enjoy"
     commands = parser.add_subparsers(
-        dest="command", required=True, metavar="{map,train,compare,reproduce}", help="sb3-dtdpg <command> -h: its options"
+        dest="command", required=True, metavar="{" + names + "}", help="sb3-dtdpg <command> -h: its options"
     )
 
     def command(name: str, help_text: str) -> argparse.ArgumentParser:
-        sub = commands.add_parser(name, help=help_text, description=help_text)
+        sub = commands.add_parser(
+            name, help=help_text, description=help_text, allow_abbrev=False, formatter_class=_HelpFormatter
+        )
         sub.set_defaults(error=sub.error, prog=sub.prog)
         return sub
 
     p = command("map", "write the power and SINR maps of a scenario (paper Fig. 4)")
-    p.add_argument("--scenario", type=_scenario, default="mall", help="built-in scenario name or YAML path (default: mall)")
+    p.add_argument(
+        "--scenario",
+        type=_scenario,
+        default="mall",
+        help="built-in scenario name, or a YAML path (write ./name for a file named like a built-in) (default: mall)",
+    )
     p.add_argument(
         "--out", default="results/maps", help="output folder; the figure is maps_<scenario>.png (default: results/maps)"
     )
     p.set_defaults(func=_cmd_map)
 
     p = command("train", "one training run with TensorBoard logging, then a test evaluation")
-    p.add_argument("--algo", required=True, choices=ALGORITHMS, help="the algorithm")
+    p.add_argument("--algo", required=True, choices=_ALGORITHMS, help="the algorithm")
     p.add_argument(
         "--env",
         type=_env_id,
-        default=DEFAULT_ENV_ID,
-        help=f"any registered Gymnasium env id (default: {DEFAULT_ENV_ID}); --scenario, --multiple-access and "
+        default=_DEFAULT_ENV_ID,
+        help=f"any registered Gymnasium env id (default: {_DEFAULT_ENV_ID}); --scenario, --multiple-access and "
         "--channel apply to the NomaRadioMap envs only",
     )
     p.add_argument("--scenario", type=_scenario, default=None, help="scenario name or YAML path (default: the env's, mall)")
     budget = p.add_mutually_exclusive_group()
     budget.add_argument("--episodes", type=_positive, default=500, help="training episodes (default: 500, the paper's)")
     budget.add_argument("--timesteps", type=_positive, default=None, help="training timesteps instead of episodes")
-    p.add_argument("--seed", type=int, default=0, help="seed of the run (default: 0)")
+    p.add_argument("--seed", type=_seed, default=0, help=f"seed of the run, 0..{_MAX_SEED} (default: 0)")
     p.add_argument("--multiple-access", choices=_MODES, default=None, help="NOMA or OMA downlink (default: the env id's)")
     p.add_argument(
         "--channel", choices=("radio_map", "rayleigh"), default=None, help="training channel (default: the env id's)"
     )
-    p.add_argument("--learning-rate", type=float, default=None, help="override the algorithm's learning rate")
-    p.add_argument("--hyperparams", choices=HYPERPARAMS, default=None, help=_HYPERPARAMS_HELP)
+    p.add_argument("--learning-rate", type=_learning_rate, default=None, help="override the algorithm's learning rate")
+    _add_hyperparameter_options(p)
     p.add_argument(
         "--observation",
-        choices=OBSERVATIONS,
+        choices=_OBSERVATIONS,
         default=None,
         help=_OBSERVATION_HELP + " (default: goal on the NomaRadioMap envs)",
     )
@@ -455,14 +701,14 @@ def build_parser() -> argparse.ArgumentParser:
         "last one (default: 10)",
     )
     p.add_argument("--eval-episodes", type=_positive, default=20, help="test episodes after training (default: 20)")
-    p.add_argument("--eval-seed", type=int, default=10_000, help="seed of the first test episode (default: 10000)")
+    p.add_argument("--eval-seed", type=_seed, default=10_000, help="seed of the first test episode (default: 10000)")
     p.add_argument(
         "--threads",
-        type=int,
+        type=_threads,
         default=1,
         help="torch threads (default: 1, fastest for these small networks; 0: torch's default)",
     )
-    p.add_argument("--verbose", type=int, default=0, help="SB3 verbosity: 0, 1 or 2 (default: 0)")
+    p.add_argument("--verbose", type=int, choices=(0, 1, 2), default=0, help="SB3 verbosity: 0, 1 or 2 (default: 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)
 
@@ -471,7 +717,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_seeds(p)
     p.add_argument("--out", default="results/compare", help="output folder (default: results/compare)")
     p.add_argument(
-        "--algos", nargs="+", choices=ALGORITHMS, default=["dtdpg", "ddpg"], help="algorithms (default: dtdpg ddpg)"
+        "--algos", nargs="+", choices=_ALGORITHMS, default=["dtdpg", "ddpg"], help="algorithms (default: dtdpg ddpg)"
     )
     p.add_argument(
         "--multiple-access", nargs="+", choices=_MODES, default=list(_MODES), help="downlink mode(s) (default: noma oma)"
@@ -485,9 +731,9 @@ def build_parser() -> argparse.ArgumentParser:
         replacement="--multiple-access",
         help=argparse.SUPPRESS,
     )
-    p.add_argument("--env", type=_env_id, default=DEFAULT_ENV_ID, help=f"a NomaRadioMap env id (default: {DEFAULT_ENV_ID})")
+    p.add_argument("--env", type=_env_id, default=_DEFAULT_ENV_ID, help=f"a NomaRadioMap env id (default: {_DEFAULT_ENV_ID})")
     p.add_argument("--scenario", type=_scenario, default=None, help="scenario name or YAML path (default: the budget's)")
-    _add_common_run_options(p, HYPERPARAMS)
+    _add_common_run_options(p)
     p.set_defaults(func=_cmd_compare)
 
     p = command("reproduce", "every experiment of the paper's Section V; finished runs are not re-run")
@@ -495,8 +741,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--budget",
         type=_budget,
         default="tiny",
-        help=_budget_help("tiny, the whole pipeline in minutes")
-        + " (the paper's scale, about an hour on 2 cores: sb3-dtdpg reproduce --budget paper)",
+        help=_budget_help("tiny, the whole pipeline in minutes, too short to learn; smoke shows learning"),
     )
     _add_seeds(p)
     p.add_argument("--out", default="results/reproduce", help="output folder (default: results/reproduce)")
@@ -508,14 +753,38 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="train only the runs of these experiments (default: all); the tables use every finished run",
     )
-    _add_common_run_options(p, HYPERPARAMS)
+    _add_common_run_options(p)
     p.set_defaults(func=_cmd_reproduce)
+
+    p = command("evaluate", "test a saved model on the test missions and print the table of compare")
+    _add_saved_model_options(p, "seed of the first test episode; episode i uses seed + i (default: 10000, as compare)")
+    p.add_argument("--n-episodes", type=_positive, default=20, help="test episodes (default: 20, the paper's)")
+    p.add_argument("--json", type=_output_file((".json",)), default=None, help="also write summary and episodes as JSON")
+    p.add_argument("--csv", type=_output_file((".csv",)), default=None, help="also write one row per episode as CSV")
+    p.set_defaults(func=_cmd_evaluate)
+
+    p = command("enjoy", "run one mission of a saved model; --record writes it as an animation (no display needed)")
+    _add_saved_model_options(p, "seed of the mission (default: 10000, test episode 0 of evaluate and compare)")
+    p.add_argument(
+        "--record",
+        type=_output_file((".gif", ".mp4")),
+        default=None,
+        metavar="FILE",
+        help="write the mission as an animated .gif (or .mp4, needs ffmpeg): paths, power split, outage",
+    )
+    p.add_argument("--fps", type=_positive, default=10, help="frames per second of the recording (default: 10)")
+    p.add_argument(
+        "--max-frames", type=_positive, default=120, help="at most this many frames; long missions skip steps (default: 120)"
+    )
+    p.set_defaults(func=_cmd_enjoy)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``sb3-dtdpg`` console script."""
-    args = build_parser().parse_args(argv)
+    args, unknown = build_parser().parse_known_args(argv)
+    if unknown:  # argparse reports these with the top-level usage; the subcommand's is the one that helps
+        args.error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
         return args.func(args)
     except KeyboardInterrupt:

@@ -100,6 +100,17 @@ class EvaluationResult:
         """Half-width of the confidence interval of the mean MQI over episodes."""
         return mean_ci(self._column("mqi"), self.confidence)[1]
 
+    def __repr__(self) -> str:
+        """One line (the per-episode records are in ``episodes``, the means in :meth:`summary`)."""
+        if not self.episodes:
+            return "EvaluationResult(0 episodes)"
+        summary = self.summary()
+        return (
+            f"EvaluationResult({self.n_episodes} episodes: success {100 * summary['success_rate']:.0f} %, "
+            f"MQI {summary['mqi']:.1f} ± {summary['mqi_ci']:.1f}, outage steps {summary['outage_steps']:.1f}, "
+            f"mission time {summary['mission_time']:.1f}; .summary() for the means, .episodes for the records)"
+        )
+
     def summary(self) -> dict[str, float]:
         """Means (and CI half-widths ``*_ci``) of the episode metrics, as a flat dict."""
         out: dict[str, float] = {"n_episodes": float(self.n_episodes), "success_rate": self.success_rate}

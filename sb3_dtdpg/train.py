@@ -3,10 +3,36 @@
 
 Every zoo flag works as documented by rl_zoo3 (``--algo dtdpg --env NomaRadioMap-v0 -tb runs/``,
 ``--optimize --storage ... --study-name ...``, ``--trial-id``, ...). Without ``--conf-file`` the package's
-own ``zoo_configs/<algo>.yml`` is used (:func:`sb3_dtdpg.zoo.default_config`). Needs the ``zoo`` extra.
+own ``zoo_configs/<algo>.yml`` is used (:func:`sb3_dtdpg.zoo.default_config`). Needs the ``zoo`` extra
+(``pip install -e ".[zoo]"`` in a clone of the repository).
+
+A mistake in the hyperparameters (a file entry or a ``-params`` value: an unknown key such as ``learnin_rate``,
+a ``net_arch`` too large to allocate) is one ``error:`` line with a did-you-mean and exit status 2, before
+the zoo creates its log folder (:func:`sb3_dtdpg.overrides.check_constructor_kwargs`).
 """
 
 import sys
+from typing import Any
+
+#: Keys of a zoo hyperparameter entry that the zoo itself reads (they never reach the model's constructor).
+ZOO_KEYS = ("noise_type", "noise_std")
+
+
+def _checked_manager(base: type) -> type:
+    """The zoo's experiment manager, checking the model's keyword arguments before anything is created."""
+    from sb3_dtdpg.overrides import check_constructor_kwargs
+
+    class CheckedExperimentManager(base):  # type: ignore[misc, valid-type]
+        def _preprocess_hyperparams(self, hyperparams: dict[str, Any]) -> tuple[Any, ...]:
+            import rl_zoo3
+
+            processed, *others = super()._preprocess_hyperparams(hyperparams)
+            kwargs = {key: value for key, value in processed.items() if key != "policy"}
+            where = f" (env {self.env_name.gym_id} in {self.config or 'the default config'}, or -params)"
+            check_constructor_kwargs(rl_zoo3.ALGOS[self.algo], kwargs, where, extra=ZOO_KEYS)
+            return (processed, *others)
+
+    return CheckedExperimentManager
 
 
 def main() -> None:
@@ -17,10 +43,16 @@ def main() -> None:
         sys.exit(f"python -m sb3_dtdpg.train: error: {error}")
     import rl_zoo3.train
 
+    from sb3_dtdpg.overrides import HyperparameterError
+
     register_dtdpg()
     # rl_zoo3.train builds the experiment from its own module-level name: use the fixed manager.
-    rl_zoo3.train.ExperimentManager = ExperimentManager  # type: ignore[misc]
-    rl_zoo3.train.train()
+    rl_zoo3.train.ExperimentManager = _checked_manager(ExperimentManager)  # type: ignore[misc]
+    try:
+        rl_zoo3.train.train()
+    except HyperparameterError as error:
+        print(f"python -m sb3_dtdpg.train: error: {error}", file=sys.stderr)
+        sys.exit(2)
 
 
 if __name__ == "__main__":

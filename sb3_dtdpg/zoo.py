@@ -9,7 +9,8 @@ Importing this module also imports :mod:`noma_radiomap`, so the NomaRadioMap env
 
 :class:`ExperimentManager` is the zoo's own with a few fixes and the package's default configs, used by
 ``python -m sb3_dtdpg.train`` (see its docstring). This module needs the ``zoo`` extra
-(``pip install "sb3-dtdpg[zoo]"``); without it, importing it raises an ``ImportError`` that says so.
+(``pip install -e ".[zoo]"`` in a clone of the repository); without it, importing it raises an ``ImportError``
+that says so.
 """
 
 import dataclasses
@@ -24,7 +25,7 @@ try:
 except ModuleNotFoundError as error:
     raise ModuleNotFoundError(
         f"the RL Zoo integration of sb3-dtdpg needs the 'zoo' extra ({error.name} is not installed): "
-        'pip install "sb3-dtdpg[zoo]"',
+        'pip install -e ".[zoo]" in your clone of the repository',
         name=error.name,
     ) from error
 

@@ -27,7 +27,7 @@ def _agg_backend(monkeypatch):
 
 
 def test_compare_writes_table_csv_figures_and_event_files(tmp_path, capsys):
-    assert main(["compare", "--budget", "_micro", "--hyperparams", "paper", "--seeds", "2", "--out", str(tmp_path)]) == 0
+    assert main(["compare", "--budget", "_micro", "--preset", "paper", "--seeds", "2", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert "DT-DPG" in printed and "DDPG" in printed and "best planner" in printed and "shortest-path planner" in printed
     for name in ("results.md", "results.csv", "results_runs.csv", "learning_curves.png", "trajectories.png"):
@@ -144,7 +144,7 @@ def test_map_and_train_commands(tmp_path):
         "train",
         "--algo",
         "ddpg",
-        "--hyperparams",
+        "--preset",
         "paper",
         "--scenario",
         "small",
@@ -170,7 +170,7 @@ def test_map_and_train_commands(tmp_path):
         (["compare", "--budget", "huge"], "budget must be one of"),
         (["compare", "--seeds", "0"], "positive integer"),
         (["train", "--algo", "ppo"], "invalid choice"),
-        (["reproduce", "--hyperparams", "fast"], "invalid choice"),
+        (["reproduce", "--preset", "fast"], "invalid choice"),
     ],
 )
 def test_bad_arguments_are_rejected(argv, message, capsys):

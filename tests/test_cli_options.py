@@ -47,10 +47,10 @@ def bad_yaml(tmp_path):
         (["compare", "--scenario", "BAD_YAML"], "broken.yaml"),
         (["train", "--algo", "ddpg", "--env", "NoSuchEnv-v0"], "'NoSuchEnv-v0' is not a registered env id"),
         (["train", "--algo", "ddpg", "--env", "Pendulum-v1", "--multiple-access", "oma"], "apply to the mission envs only"),
-        (["train", "--algo", "td3", "--hyperparams", "tuned"], "defined for 'dtdpg' and 'ddpg' only"),
-        (["train", "--algo", "dtdpg", "--hyperparams", "tuned", "--timesteps", "500"], "learning_starts=2000"),
+        (["train", "--algo", "td3", "--preset", "tuned"], "defined for 'dtdpg' and 'ddpg' only"),
+        (["train", "--algo", "dtdpg", "--preset", "tuned", "--timesteps", "500"], "learning_starts=2000"),
         (["compare", "--env", "Pendulum-v1"], "compare runs on the NomaRadioMap envs"),
-        (["compare", "--budget", "_micro", "--hyperparams", "tuned"], "3 episodes of at most 60 steps"),
+        (["compare", "--budget", "_micro", "--preset", "tuned"], "3 episodes of at most 60 steps"),
         (["compare", "--budget", "_micro"], "cannot train"),  # tuned is the default
         (["reproduce", "--budget", "_micro"], "cannot train: the first gradient step comes after learning_starts=2000"),
         (["compare", "--n-seeds", "two"], "expected a positive integer, got 'two'"),
@@ -92,8 +92,9 @@ def test_old_spellings_still_work_and_say_so(old, new, dest, value, capsys):
 
 def test_out_is_a_folder_everywhere():
     for name, sub in subcommands(build_parser()).items():
-        (out,) = [a for a in sub._actions if "--out" in a.option_strings]
-        assert "folder" in out.help, name
+        outs = [a for a in sub._actions if "--out" in a.option_strings]
+        assert len(outs) == (0 if name in ("evaluate", "enjoy") else 1), name  # those two name their files
+        assert all("folder" in out.help for out in outs), name
 
 
 def test_reproduce_defaults_to_a_budget_of_minutes():
@@ -106,7 +107,7 @@ def test_reproduce_defaults_to_a_budget_of_minutes():
 
 
 def test_train_works_with_any_registered_env(tmp_path, capsys):
-    args = ["train", "--algo", "dtdpg", "--hyperparams", "paper", "--env", "Pendulum-v1", "--timesteps", "300"]
+    args = ["train", "--algo", "dtdpg", "--preset", "paper", "--env", "Pendulum-v1", "--timesteps", "300"]
     args += ["--eval-episodes", "1", "--no-progress"]
     assert main([*args, "--tb", str(tmp_path / "tb"), "--out", str(tmp_path / "models")]) == 0
     assert (tmp_path / "models" / "dtdpg_Pendulum-v1_s0.zip").exists()
@@ -114,7 +115,7 @@ def test_train_works_with_any_registered_env(tmp_path, capsys):
 
 
 def test_train_on_a_mission_env_evaluates_on_its_last_reward_phase(tmp_path, capsys):
-    args = ["train", "--algo", "ddpg", "--hyperparams", "paper", "--env", "NomaRadioMapOMA-v0", "--scenario", "small"]
+    args = ["train", "--algo", "ddpg", "--preset", "paper", "--env", "NomaRadioMapOMA-v0", "--scenario", "small"]
     args += ["--episodes", "2", "--eval-episodes", "1", "--no-progress", "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]
     assert main(args) == 0
     # the env id's own mode (OMA) when --multiple-access is not given, the goal-conditioned observation by default
@@ -138,4 +139,5 @@ def test_zoo_scripts_without_the_zoo_extra_say_what_to_install(script, monkeypat
         importlib.import_module(f"sb3_dtdpg.{script}").main()
     message = str(exit_info.value.code)
     assert message.startswith(f"python -m sb3_dtdpg.{script}: error: ") and "\n" not in message
-    assert "'zoo' extra (rl_zoo3 is not installed)" in message and 'pip install "sb3-dtdpg[zoo]"' in message
+    # the package is installed from a clone, not from an index it is not on
+    assert "'zoo' extra (rl_zoo3 is not installed)" in message and 'pip install -e ".[zoo]"' in message

@@ -129,6 +129,10 @@ def test_summary_and_records_are_consistent():
     assert summary["mqi_ci"] == pytest.approx(mean_ci(mqi)[1])
     assert summary["success_rate"] == np.mean([e["success"] for e in result.episodes])
     assert summary["n_episodes"] == 4
+    # The printout is one line of means, not the per-episode records
+    text = repr(result)
+    assert "\n" not in text and text.startswith("EvaluationResult(4 episodes: success ")
+    assert f"MQI {summary['mqi']:.1f} ± {summary['mqi_ci']:.1f}" in text and "destination_x_0" not in text
 
 
 def test_bad_arguments_raise_clear_errors():

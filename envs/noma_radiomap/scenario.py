@@ -805,6 +805,9 @@ def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
     """
     Load a scenario: a built-in name (see :func:`list_scenarios`) or the path of a YAML file.
 
+    A string that is a built-in name is the built-in scenario, even where a file of that name exists in the
+    working folder: write a path (``./small``, ``small.yaml``) or pass a ``pathlib.Path`` for the file.
+
     :param name_or_path: e.g. ``"mall"`` or ``"my_scenarios/office.yaml"``
     :return: the validated scenario
     :raises ValueError: unknown name, unreadable or malformed YAML (file and line), duplicate or unknown keys,
@@ -823,6 +826,9 @@ def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
                 content = file.read(MAX_FILE_BYTES + 1)
         except OSError as error:
             raise ValueError(f"{source}: cannot read the scenario file ({error.strerror})") from None
+    elif os.path.exists(text):
+        kind = "a folder" if os.path.isdir(text) else "not a regular file (a FIFO, socket or device)"
+        raise ValueError(f"scenario {text!r} is {kind}: give a scenario YAML file or a built-in name ({builtins})")
     else:
         raise ValueError(f"scenario {text!r}: unknown built-in name and no such file (built-in scenarios: {builtins})")
     return Scenario.from_dict(_read_yaml(content, source), source=source)

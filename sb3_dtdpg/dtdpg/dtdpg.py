@@ -9,8 +9,10 @@ from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, EvalCallback
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
+from sb3_dtdpg import env_settings
 from sb3_dtdpg.common.buffers import reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
 from sb3_dtdpg.common.checks import check_folder, check_off_policy_settings, check_total_timesteps
@@ -269,6 +271,24 @@ class DTDPG(LeanStep, DDPG):
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
         )
+
+    # The env settings the model was trained with travel in the zip (sb3_dtdpg.env_settings): a mismatched env
+    # is refused at load/set_env with the settings to use, instead of a bare space mismatch (or, NOMA vs OMA,
+    # nothing at all).
+    def save(self, path: Any, exclude: Iterable[str] | None = None, include: Iterable[str] | None = None) -> None:
+        env_settings.record(self)
+        super().save(path, exclude=exclude, include=include)
+
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        env_settings.check_settings(getattr(self, "env_settings", None), env)
+        super().set_env(env, force_reset=force_reset)
+
+    @classmethod
+    def load(cls, path: Any, env: GymEnv | None = None, device: Any = "auto", custom_objects: Any = None, **kwargs: Any):
+        if env is not None:
+            data, _, _ = load_from_zip_file(path, device="cpu", custom_objects=custom_objects, load_data=True)
+            env_settings.check_settings((data or {}).get("env_settings"), env, f"the model {path}")
+        return super().load(path, env=env, device=device, custom_objects=custom_objects, **kwargs)
 
 
 def _curriculum_evaluations(callbacks: list[BaseCallback]) -> list[EvalCallback]:

@@ -1,23 +1,38 @@
-"""Across-seed aggregates for few-run comparisons: the interquartile mean (IQM) and bootstrap CIs.
+"""Across-seed statistics for few-run comparisons, after Agarwal et al., "Deep Reinforcement Learning at the
+Edge of the Statistical Precipice" (NeurIPS 2021): the interquartile mean (IQM) with stratified-bootstrap CIs,
+performance profiles and the probability of improvement.
 
-These follow Agarwal et al., "Deep Reinforcement Learning at the Edge of the Statistical Precipice"
-(NeurIPS 2021), the method of the ``rliable`` library: the IQM is the mean of the middle 50 % of the
-scores (``scipy.stats.trim_mean(scores, 0.25)``), robust to one outlier seed yet less noisy than the
-median, and its CI is a percentile bootstrap that resamples the runs of each task independently
-("stratified"). A comparison here has one task per configuration, so only a few lines of numpy/scipy
-are needed and ``rliable`` (which pulls in ``arch`` and its own plotting stack) is not a dependency.
+Why not ``rliable``, the authors' library: rliable 1.2 (the latest) pins ``arch < 8``, and every ``arch`` below
+8 fails at import with pandas 3 (``deprecate_kwarg`` changed), which this package uses; so rliable cannot be
+imported next to it. The same estimators are in ``scipy.stats``, which the package already needs, and they are
+used here rather than re-implemented:
+
+- IQM: ``scipy.stats.trim_mean(scores, 0.25)`` (rliable's ``metrics.aggregate_iqm``);
+- CIs: ``scipy.stats.bootstrap`` with the percentile method (rliable's default). Given one sample per task
+  with ``paired=False`` it resamples the runs of each task independently, which is rliable's *stratified*
+  bootstrap;
+- probability of improvement ``P(X > Y) + P(X = Y) / 2``: the Mann-Whitney U statistic divided by
+  ``n_x n_y`` (``scipy.stats.mannwhitneyu``), as rliable's ``metrics.probability_of_improvement`` computes it;
+- performance profile: the share of runs scoring above each threshold tau (rliable's
+  ``create_performance_profile``), with a bootstrap CI per threshold.
 
 With fewer than two runs no interval can be estimated: the bounds are ``nan``, shown as ``n/a``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy import stats
 
-__all__ = ["iqm", "pointwise_bootstrap_ci", "stratified_bootstrap_ci"]
+__all__ = [
+    "iqm",
+    "performance_profile",
+    "pointwise_bootstrap_ci",
+    "probability_of_improvement",
+    "stratified_bootstrap_ci",
+]
 
 
 def iqm(scores: np.ndarray) -> float:
@@ -30,6 +45,32 @@ def iqm(scores: np.ndarray) -> float:
     x = np.asarray(scores, dtype=np.float64).ravel()
     x = x[~np.isnan(x)]
     return float(stats.trim_mean(x, 0.25)) if x.size else float("nan")
+
+
+def _check_confidence(confidence: float) -> None:
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+
+
+def _percentile_ci(
+    samples: Sequence[np.ndarray], statistic: Callable[..., float], confidence: float, n_resamples: int, seed: int
+) -> tuple[float, float]:
+    """``scipy.stats.bootstrap`` of independent samples (percentile method); a constant statistic gives a point."""
+    point = statistic(*samples)
+    result = stats.bootstrap(
+        tuple(samples),
+        lambda *resampled: statistic(*resampled),
+        vectorized=False,
+        paired=False,
+        confidence_level=confidence,
+        n_resamples=n_resamples,
+        method="percentile",
+        random_state=np.random.default_rng(seed),
+    )
+    low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
+    if np.isnan(low) or np.isnan(high):  # every resample equal (scipy reports a degenerate distribution as nan)
+        return float(point), float(point)
+    return low, high
 
 
 def stratified_bootstrap_ci(
@@ -49,27 +90,21 @@ def stratified_bootstrap_ci(
     :param seed: seed of the resampling (the CI is deterministic for a given seed)
     :return: ``(low, high)``; ``(nan, nan)`` with fewer than two runs
     """
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+    _check_confidence(confidence)
     x = np.asarray(scores, dtype=np.float64)
     x = x.reshape(len(x), -1) if x.ndim else x.reshape(1, 1)
-    n_runs, n_tasks = x.shape
-    if n_runs < 2:
+    if x.shape[0] < 2:
         return float("nan"), float("nan")
-    rng = np.random.default_rng(seed)
-    rows = rng.integers(0, n_runs, size=(n_resamples, n_runs, n_tasks))
-    resampled = np.take_along_axis(x[None], rows, axis=1)
-    values = np.array([statistic(sample) for sample in resampled])
-    tail = 100.0 * (1.0 - confidence) / 2.0
-    low, high = np.percentile(values, [tail, 100.0 - tail])
-    return float(low), float(high)
+    tasks = [x[:, k] for k in range(x.shape[1])]
+    return _percentile_ci(tasks, lambda *columns: statistic(np.stack(columns, axis=1)), confidence, n_resamples, seed)
 
 
 def pointwise_bootstrap_ci(
     curves: np.ndarray, confidence: float = 0.95, n_resamples: int = 1000, seed: int = 0
 ) -> tuple[np.ndarray, np.ndarray]:
     """
-    Percentile bootstrap CI of the mean over runs, at every point of a set of curves.
+    Percentile bootstrap CI of the mean over runs, at every point of a set of curves (``scipy.stats.bootstrap``
+    along the runs axis).
 
     Unlike a t-interval, the band stays within the range of the runs (a success rate stays in [0, 1])
     and does not blow up with two or three seeds.
@@ -86,9 +121,66 @@ def pointwise_bootstrap_ci(
     if x.shape[0] < 2:
         nan = np.full(x.shape[1], np.nan)
         return nan, nan.copy()
-    rng = np.random.default_rng(seed)
-    rows = rng.integers(0, x.shape[0], size=(n_resamples, x.shape[0]))
-    means = x[rows].mean(axis=1)
-    tail = 100.0 * (1.0 - confidence) / 2.0
-    low, high = np.percentile(means, [tail, 100.0 - tail], axis=0)
-    return low, high
+    _check_confidence(confidence)
+    result = stats.bootstrap(
+        (x,),
+        np.mean,
+        axis=0,
+        vectorized=True,
+        confidence_level=confidence,
+        n_resamples=n_resamples,
+        method="percentile",
+        random_state=np.random.default_rng(seed),
+    )
+    low, high = np.asarray(result.confidence_interval.low), np.asarray(result.confidence_interval.high)
+    constant = np.isnan(low) | np.isnan(high)  # a point where every run has the same value
+    mean = x.mean(axis=0)
+    return np.where(constant, mean, low), np.where(constant, mean, high)
+
+
+def probability_of_improvement(
+    x: np.ndarray, y: np.ndarray, confidence: float = 0.95, n_resamples: int = 2000, seed: int = 0
+) -> tuple[float, float, float]:
+    """
+    The probability that a run of X scores above a run of Y, ties counting half (Mann-Whitney U / (n_x n_y)).
+
+    :param x: scores of X's runs
+    :param y: scores of Y's runs
+    :param confidence: confidence level of the CI
+    :param n_resamples: bootstrap resamples (X and Y resampled independently)
+    :param seed: seed of the resampling
+    :return: ``(probability, low, high)``; the bounds are ``nan`` unless both have at least two runs
+    """
+    _check_confidence(confidence)
+    a, b = np.asarray(x, dtype=np.float64).ravel(), np.asarray(y, dtype=np.float64).ravel()
+    if a.size == 0 or b.size == 0:
+        raise ValueError(f"probability_of_improvement needs scores for both, got {a.size} and {b.size}")
+
+    def probability(p: np.ndarray, q: np.ndarray) -> float:
+        return float(stats.mannwhitneyu(p, q).statistic) / (p.size * q.size)
+
+    point = probability(a, b)
+    if a.size < 2 or b.size < 2:
+        return point, float("nan"), float("nan")
+    return (point, *_percentile_ci([a, b], probability, confidence, n_resamples, seed))
+
+
+def performance_profile(
+    scores: np.ndarray, taus: np.ndarray, confidence: float = 0.95, n_resamples: int = 1000, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    The share of runs with a score above each threshold (a run-score distribution), with bootstrap CIs.
+
+    :param scores: the runs' scores
+    :param taus: thresholds
+    :param confidence: confidence level of the CIs
+    :param n_resamples: bootstrap resamples
+    :param seed: seed of the resampling
+    :return: ``(share, low, high)``, each shaped like ``taus``; the bounds are ``nan`` with fewer than two runs
+    """
+    x = np.asarray(scores, dtype=np.float64).ravel()
+    thresholds = np.asarray(taus, dtype=np.float64).ravel()
+    above = (x[:, None] > thresholds[None, :]).astype(np.float64)  # (runs, taus)
+    share = above.mean(axis=0)
+    low, high = pointwise_bootstrap_ci(above, confidence, n_resamples, seed)
+    return share, low, high

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from sb3_dtdpg.experiments.specs import RunSpec
 
-__all__ = ["BUDGETS", "PUBLIC_BUDGETS", "Budget", "check_budget", "get_budget"]
+__all__ = ["BUDGETS", "BUDGET_ALIASES", "PUBLIC_BUDGETS", "Budget", "check_budget", "get_budget"]
 
 
 @dataclass(frozen=True)
@@ -32,22 +32,28 @@ class Budget:
     scenario: str | None = None
 
 
-#: ``tiny`` is a smoke run on the ``small`` scenario; ``default`` fits ``compare`` in <= 15 minutes on a
-#: 2-core machine (measured, docs/RESULTS.md); ``paper`` is the paper's scale; ``reduced`` is the paper's
-#: experiments on the ``small`` scenario with 200/280 episodes instead of 500/700 (what a 2-core machine
-#: runs in about an hour, docs/RESULTS.md). ``_micro`` is for the tests.
+#: ``tiny`` runs the whole pipeline on the ``small`` scenario in minutes (too short to learn: a check that it runs);
+#: ``smoke`` is the shortest budget that shows learning: 150 episodes on ``small``, where DT-DPG brings both robots
+#: home on the test missions (measured, docs/BENCHMARKS.md); ``default`` fits ``compare`` in <= 15 minutes on a
+#: 2-core machine (docs/RESULTS.md); ``mall-200`` and ``small-200`` are the paper's experiments with 200/280
+#: episodes instead of 500/700 on ``mall`` and on ``small`` (``small-200``: what a 2-core machine runs in about an
+#: hour, docs/RESULTS.md); ``paper`` is the paper's scale. ``_micro`` is for the tests.
 BUDGETS: dict[str, Budget] = {
     "_micro": Budget("_micro", episodes=3, long_episodes=4, eval_episodes=2, seeds=2, scenario="small"),
     "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small"),
-    "reduced": Budget("reduced", episodes=200, long_episodes=280, eval_episodes=20, seeds=3, scenario="small"),
+    "smoke": Budget("smoke", episodes=150, long_episodes=200, eval_episodes=20, seeds=1, scenario="small"),
     "default": Budget("default", episodes=250, long_episodes=350, eval_episodes=20, seeds=1),
-    "small": Budget("small", episodes=200, long_episodes=280, eval_episodes=20, seeds=3),
+    "mall-200": Budget("mall-200", episodes=200, long_episodes=280, eval_episodes=20, seeds=3),
+    "small-200": Budget("small-200", episodes=200, long_episodes=280, eval_episodes=20, seeds=3, scenario="small"),
     "paper": Budget("paper", episodes=500, long_episodes=700, eval_episodes=20, seeds=5),
 }
+#: The old names, which did not say what they run: ``small`` ran on ``mall``, ``reduced`` on ``small``.
+BUDGET_ALIASES: dict[str, str] = {"small": "mall-200", "reduced": "small-200"}
+BUDGETS.update({old: BUDGETS[new] for old, new in BUDGET_ALIASES.items()})
 
 
-#: The budgets a user picks by name (``_micro`` is for the tests).
-PUBLIC_BUDGETS: tuple[str, ...] = tuple(name for name in BUDGETS if not name.startswith("_"))
+#: The budgets a user picks by name (``_micro`` is for the tests, the aliases are the old names).
+PUBLIC_BUDGETS: tuple[str, ...] = tuple(name for name in BUDGETS if not name.startswith("_") and name not in BUDGET_ALIASES)
 
 
 def get_budget(budget: str | Budget) -> Budget:
@@ -74,7 +80,9 @@ def check_budget(spec: RunSpec) -> None:
     from noma_radiomap import load_scenario
     from sb3_dtdpg.baselines import check_training_budget, hyperparameter
 
-    learning_starts = int(hyperparameter(spec.algo, "learning_starts", spec.hyperparams))
+    learning_starts = int(
+        spec.override_kwargs.get("learning_starts", hyperparameter(spec.algo, "learning_starts", spec.hyperparams))
+    )
     if spec.timesteps is not None:
         check_training_budget(spec.timesteps, learning_starts, f"{spec.timesteps} env steps ({spec.run_id})")
         return

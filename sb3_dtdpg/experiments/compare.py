@@ -99,6 +99,12 @@ def evaluate_planners(
     return rows, trajectories
 
 
+def _finished_line(out: Path) -> Any:
+    from sb3_dtdpg.experiments.reproduce import finished_line  # reproduce imports this module: import late
+
+    return finished_line(out)
+
+
 def mission_bound(env_id: str, mode: str, n_episodes: int, eval_seed: int, env_kwargs: dict[str, Any]) -> float:
     """
     The mean over the test missions of :func:`noma_radiomap.planners.mqi_upper_bound` (radio-map channel): no
@@ -184,7 +190,9 @@ def run_compare(
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams, observation)
-        report = run_many(specs, out, n_workers=n_workers, progress=progress)
+        report = run_many(
+            specs, out, n_workers=n_workers, progress=progress, on_finish=None if progress else _finished_line(out)
+        )
         for run_id, error in report.failed.items():
             print(f"run {run_id} failed: {error}")
 
@@ -202,6 +210,10 @@ def run_compare(
         )
         tables.save_tables(summary, records, out, "results", title)
         tables.print_table(summary, title)
+        if not records.empty:
+            plots.plot_statistics(
+                records, out, f"{budget.scenario or 'mall'}, {budget.name} budget ({budget.episodes} episodes)"
+            )
 
         groups: dict[str, list[Path]] = {}
         for spec in specs:
@@ -211,7 +223,9 @@ def run_compare(
                 )
         if groups:
             plots.plot_learning_curves(
-                groups, out / "learning_curves.png", title="Learning curves (mean and 95 % CI over seeds)"
+                groups,
+                out / "learning_curves.png",
+                title=f"Learning curves on {budget.scenario or 'mall'}, {budget.name} budget (mean and 95 % CI over seeds)",
             )
         panels: dict[str, dict[str, Any]] = {}
         goals: dict[str, Any] = {}
@@ -235,13 +249,12 @@ def run_compare(
             budget.scenario or "mall",
             panels,
             out / "trajectories.png",
-            title="Test episode 0 (same mission and fading for every policy)",
+            title=f"Test episode 0 on {budget.scenario or 'mall'} (same mission and fading for every policy)",
             destinations=goals,
         )
-        if progress:
-            print(
-                f"wrote {out}/results.md, results.csv, results_runs.csv, learning_curves.png, trajectories.png; "
-                f"TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for {len(report.finished)} runs, "
-                f"{len(report.skipped)} already done)"
-            )
+        print(  # also without progress bars: where the results went
+            f"wrote {out}/results.md, results.csv, results_runs.csv, learning_curves.png, trajectories.png, "
+            f"statistics_*.png; TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for "
+            f"{len(report.finished)} runs, {len(report.skipped)} already done)"
+        )
         return summary

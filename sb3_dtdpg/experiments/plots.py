@@ -13,12 +13,19 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sb3_dtdpg.experiments.aggregate import pointwise_bootstrap_ci
+from sb3_dtdpg.experiments.aggregate import (
+    iqm,
+    performance_profile,
+    pointwise_bootstrap_ci,
+    probability_of_improvement,
+    stratified_bootstrap_ci,
+)
 
 __all__ = [
     "episode_curves",
     "episode_destinations",
     "plot_learning_curves",
+    "plot_statistics",
     "plot_trajectories",
     "read_scalars",
     "rolling_curve",
@@ -36,6 +43,9 @@ _PHASE_TAG = "curriculum/phase"
 #: Policy colours on the SINR map: none is the outage red, the obstacles' white or the interferers' orange.
 _POLICY_COLOURS = ("#00e5ff", "#ff66ff", "#ffd700", "#7CFC00", "#1e90ff", "#ff1493")
 _ROBOT_STYLES = ("-", "--", ":", "-.")
+#: Learning-curve styles: colour, line style and marker all differ, so a series under another still shows.
+_SERIES_STYLES = ("-", "--", "-.", ":")
+_SERIES_MARKERS = ("o", "s", "^", "D", "v", "P")
 
 
 def read_scalars(log_dir: str | Path) -> pd.DataFrame:
@@ -168,7 +178,18 @@ def plot_learning_curves(
             if any(logged for curve, logged in curves if len(curve)):
                 as_logged.add(tag)
             x, mean, low, high = _mean_band(series)
-            ax.plot(x, mean, color=colour, label=f"{label} ({_count(len(series), 'seed')})")
+            style = {"ls": _SERIES_STYLES[k % len(_SERIES_STYLES)], "marker": _SERIES_MARKERS[k % len(_SERIES_MARKERS)]}
+            markevery = (k * max(len(x) // 40, 1), max(len(x) // 10, 1))  # staggered: markers of equal curves differ
+            ax.plot(
+                x,
+                mean,
+                color=colour,
+                lw=1.6,
+                ms=5,
+                markevery=markevery,
+                **style,
+                label=f"{label} ({_count(len(series), 'seed')})",
+            )
             if len(series) > 1:
                 ax.fill_between(x, low, high, color=colour, alpha=0.2, lw=0)
             for episode in filter(None, (_transfer(run) for run in runs)):
@@ -251,6 +272,7 @@ def plot_trajectories(
     n_robots = 0
     for ax, (panel, trajectories) in zip(axes, panels.items(), strict=False):
         radio_map.plot(ax=ax, kind="sinr", colorbar=True, legend=False)
+        _mission_regions(ax, scenario)
         goals = None if destinations is None else destinations.get(panel)
         if goals is not None:
             ax.plot(*np.asarray(goals, dtype=float).T, marker="X", ms=11, color="white", mec="black", ls="none")
@@ -287,11 +309,27 @@ def plot_trajectories(
                 label=f"destination (reached within {scenario.robot.arrival_radius:g} m)",
             )
         )
+    keys += [
+        Line2D([], [], ls="--", lw=1.2, color="0.4", label="start region (scenario; white on the map)"),
+        Line2D([], [], ls="none", marker="x", ms=6, color="0.4", label="candidate destinations (scenario; white)"),
+    ]
     handles = keys + map_handles
     fig.legend(
         handles, [h.get_label() for h in keys] + map_labels, loc="outside lower center", ncol=4, fontsize=8, frameon=False
     )
     return _save(fig, path, title)
+
+
+def _mission_regions(ax: Any, scenario: Any) -> None:
+    """Each robot's start region (dashed rectangle, labelled with the robot) and candidate destinations (crosses)."""
+    from matplotlib.patches import Rectangle
+
+    for u, mission in enumerate(scenario.robots):
+        x0, y0, x1, y1 = mission.start
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", lw=1.2, ec="white", zorder=4))
+        ax.text(x0, y1, f" {u}", color="white", fontsize=7, va="bottom", zorder=4)
+        candidates = np.asarray(mission.destinations, dtype=float).reshape(-1, 2)
+        ax.plot(candidates[:, 0], candidates[:, 1], ls="none", marker="x", ms=6, color="white", zorder=4)
 
 
 def _save(fig: Any, path: str | Path, title: str | None) -> Any:
@@ -303,3 +341,86 @@ def _save(fig: Any, path: str | Path, title: str | None) -> Any:
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return fig
+
+
+def plot_statistics(records: pd.DataFrame, out: str | Path, title: str, reference: str = "DT-DPG") -> list[Path]:
+    """
+    The three few-seed statistics figures of Agarwal et al. (NeurIPS 2021), over the runs' test MQI as a share of
+    the scenario's ``t_total`` (:mod:`sb3_dtdpg.experiments.aggregate`):
+
+    - ``statistics_iqm.png``: per configuration, the IQM of the runs' scores with its 95 % stratified-bootstrap CI;
+    - ``statistics_profiles.png``: performance profiles, the share of runs above each score, with 95 % CIs;
+    - ``statistics_improvement.png``: per mode, the probability that a ``reference`` run beats a run of each other
+      algorithm, with its 95 % bootstrap CI (0.5: no difference).
+
+    :param records: :func:`sb3_dtdpg.experiments.tables.run_records` (columns ``algorithm``, ``multiple_access``,
+        ``mqi``, ``mqi_scale``)
+    :param out: output folder
+    :param title: the figures' title (name the scenario and the budget)
+    :param reference: the algorithm label compared with the others in the improvement figure
+    :return: the written files
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    scale = records["mqi_scale"].where(records["mqi_scale"] > 0, 1.0) if "mqi_scale" in records else 1.0
+    data = records.assign(score=records["mqi"] / scale)
+    groups = {f"{a} {m}": g["score"].to_numpy() for (a, m), g in data.groupby(["algorithm", "multiple_access"], sort=False)}
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    written = []
+
+    fig, ax = plt.subplots(figsize=(7.0, 0.6 * len(groups) + 1.6), layout="constrained")
+    for k, scores in enumerate(groups.values()):
+        low, high = stratified_bootstrap_ci(scores)
+        ax.plot([iqm(scores)], [k], "o", color=colours[k % len(colours)], ms=7)
+        if np.isfinite(low):
+            ax.plot([low, high], [k, k], "-", color=colours[k % len(colours)], lw=5, alpha=0.5)
+    ax.set_yticks(range(len(groups)), [f"{label} ({_count(len(s), 'run')})" for label, s in groups.items()])
+    ax.set_xlabel("IQM of the test MQI / t_total (95 % stratified-bootstrap CI)")
+    ax.grid(alpha=0.3, axis="x")
+    written.append(out / "statistics_iqm.png")
+    _save(fig, written[-1], title)
+
+    fig, ax = plt.subplots(figsize=(7.0, 4.6), layout="constrained")
+    all_scores = np.concatenate(list(groups.values()))
+    low_score, high_score = float(all_scores.min()), float(all_scores.max())
+    margin = max(0.1 * (high_score - low_score), 0.005)  # the range the runs span: where the profiles differ
+    taus = np.linspace(low_score - margin, high_score + margin, 201)
+    for k, (label, scores) in enumerate(groups.items()):
+        share, low, high = performance_profile(scores, taus)
+        colour = colours[k % len(colours)]
+        ax.plot(taus, share, color=colour, ls=_SERIES_STYLES[k % len(_SERIES_STYLES)], label=label)
+        if np.all(np.isfinite(low)):
+            ax.fill_between(taus, low, high, color=colour, alpha=0.15, lw=0)
+    ax.set(xlabel="score tau (test MQI / t_total)", ylabel="share of runs with score > tau", ylim=(-0.03, 1.03))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    written.append(out / "statistics_profiles.png")
+    _save(fig, written[-1], title)
+
+    pairs = []
+    for mode, group in data.groupby("multiple_access", sort=False):
+        by_algo = {a: g["score"].to_numpy() for a, g in group.groupby("algorithm", sort=False)}
+        if reference in by_algo:
+            pairs += [
+                (f"{reference} > {other} ({mode})", by_algo[reference], s)
+                for other, s in by_algo.items()
+                if other != reference
+            ]
+    fig, ax = plt.subplots(figsize=(7.0, 0.6 * max(len(pairs), 1) + 1.6), layout="constrained")
+    for k, (_, x, y) in enumerate(pairs):
+        probability, low, high = probability_of_improvement(x, y)
+        ax.plot([probability], [k], "o", color=colours[0], ms=7)
+        if np.isfinite(low):
+            ax.plot([low, high], [k, k], "-", color=colours[0], lw=5, alpha=0.5)
+    ax.axvline(0.5, color="0.4", ls=":", lw=1)
+    ax.set_yticks(range(len(pairs)), [label for label, _, _ in pairs])
+    ax.set(xlim=(-0.02, 1.02), xlabel="P(a run of X scores above a run of Y), 95 % CI")
+    if not pairs:
+        ax.text(0.5, 0.5, f"no {reference} runs to compare", ha="center", transform=ax.transAxes)
+    written.append(out / "statistics_improvement.png")
+    _save(fig, written[-1], title)
+    return written

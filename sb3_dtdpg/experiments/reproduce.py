@@ -18,7 +18,7 @@ DDPG vs DT-DPG. A run whose result file exists is not re-run, so the job can be 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +26,7 @@ import pandas as pd
 
 from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.evaluation import mean_ci
-from sb3_dtdpg.experiments import tables
+from sb3_dtdpg.experiments import plots, tables
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
 from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
@@ -187,6 +187,15 @@ def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[s
     return dip
 
 
+def finished_line(out: Path) -> Callable[[str], None]:
+    """The ``on_finish`` of :func:`~sb3_dtdpg.experiments.runs.run_many` without progress bars: a line per finished run."""
+
+    def report(run_id: str) -> None:
+        print(f"finished {run_id}: {Path(out) / 'runs' / run_id / 'result.json'}", flush=True)
+
+    return report
+
+
 def _check_arguments(seeds: int, observation: str, experiments: Sequence[str] | None) -> None:
     from noma_radiomap.registration import check_observation
 
@@ -244,7 +253,13 @@ def run_reproduce(
         unique.sort(key=lambda spec: spec.seed)
         if train:
             wanted = {s.run_id for name in (chosen or EXPERIMENTS) for s in experiments[name]}
-            report = run_many([s for s in unique if s.run_id in wanted], out, n_workers=n_workers, progress=progress)
+            report = run_many(
+                [s for s in unique if s.run_id in wanted],
+                out,
+                n_workers=n_workers,
+                progress=progress,
+                on_finish=None if progress else finished_line(out),
+            )
             for run_id, error in report.failed.items():
                 print(f"run {run_id} failed: {error}")
         results = {spec.run_id: load_result(out, spec) for spec in unique}
@@ -286,6 +301,7 @@ def run_reproduce(
                 "radio-map training)"
             )
             tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", title)
+            plots.plot_statistics(rec, out, f"DDPG vs DT-DPG, {budget.scenario or 'mall'}, {budget.name} budget")
             out_tables["ddpg_vs_dtdpg"] = summary
             if progress:
                 tables.print_table(summary, "DDPG vs DT-DPG")
@@ -317,6 +333,11 @@ def run_reproduce(
         if dip is not None:
             out_tables["transfer_dip"] = dip
         _figures(out, budget, experiments, results, base_lr)
+        finished = sum(result is not None for result in results.values())
+        print(
+            f"reproduce: {finished} of {len(results)} runs finished; tables (.md, .csv) and figures (.png) in {out}/, "
+            f"run folders in {out}/runs/, TensorBoard: tensorboard --logdir {out}/tb"
+        )
         return out_tables
 
 
@@ -324,10 +345,10 @@ def _figures(
     out: Path, budget: Budget, experiments: dict[str, list[RunSpec]], results: dict[str, Any], base_lr: float
 ) -> None:
     from noma_radiomap import RadioMap, load_scenario
-    from sb3_dtdpg.experiments import plots
 
     scenario = load_scenario(budget.scenario or "mall")
     RadioMap.for_scenario(scenario).plot_maps(str(out / "fig_maps.png"))
+    where = f"{scenario.name}, {budget.name} budget: {budget.episodes} episodes"  # every title names both
 
     def dirs(name: str, **match: Any) -> dict[str, list[Path]]:
         groups: dict[str, list[Path]] = {}
@@ -344,17 +365,19 @@ def _figures(
             out / "fig_reward_learning_rates.png",
             tags=(("episode/return", "reward per episode (phase reward)"),),
             smooth=5,
-            title="DT-DPG reward per episode, two learning rates (dotted: transfer)",
+            title=f"DT-DPG reward per episode, two learning rates\n({where}; dotted: transfer)",
         )
         plots.plot_learning_curves(
             groups,
             out / "fig_mqi_per_episode.png",
             tags=(("mission/mqi", "MQI per episode"),),
             smooth=5,
-            title="DT-DPG MQI per episode (dotted: transfer to MQI training)",
+            title=f"DT-DPG MQI per episode\n({where}; dotted: transfer to MQI training)",
         )
     if groups := dirs("ddpg_vs_dtdpg"):
-        plots.plot_learning_curves(groups, out / "fig_ddpg_vs_dtdpg.png", title="DDPG vs DT-DPG (radio-map training)")
+        plots.plot_learning_curves(
+            groups, out / "fig_ddpg_vs_dtdpg.png", title=f"DDPG vs DT-DPG (radio-map training; {where})"
+        )
     first = {}
     for spec in experiments["ddpg_vs_dtdpg"]:
         result = results[spec.run_id]
@@ -370,7 +393,7 @@ def _figures(
             scenario,
             panels,
             out / "fig_trajectories_noma_oma.png",
-            title="DT-DPG trajectories, NOMA vs OMA (test episode 0)",
+            title=f"DT-DPG trajectories, NOMA vs OMA (test episode 0; {where})",
             destinations=goals,
         )
     transfer = {}
@@ -385,6 +408,6 @@ def _figures(
             scenario,
             transfer,
             out / "fig_trajectories_transfer.png",
-            title="DT-DPG trajectories before/after the transfer (test episode 0)",
+            title=f"DT-DPG trajectories before/after the transfer (test episode 0; {where})",
             destinations=goals,
         )

@@ -138,6 +138,7 @@ def _build_model(spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None
         hyperparams=spec.hyperparams,
         verbose=verbose,
         **({"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}),
+        **spec.override_kwargs,
     )
     return env, model, 0
 

@@ -8,6 +8,7 @@ result under this one's name.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import inspect
 import json
 from dataclasses import dataclass
@@ -48,6 +49,8 @@ class RunSpec:
     :param timesteps: train for this many timesteps instead of ``episodes`` episodes (None: by episodes)
     :param observation: the env's observation, ``"paper"`` (the paper's state) or ``"goal"`` (the goal-conditioned
         extension, :class:`noma_radiomap.wrappers.RelativeGoalObservation`)
+    :param overrides: single hyperparameters over the set, ``(name, Python literal)`` pairs (``sb3-dtdpg train
+        --hyperparams``; :mod:`sb3_dtdpg.overrides`); a run with overrides gets ``_hp<digest>`` in its id
     """
 
     algo: str
@@ -68,6 +71,7 @@ class RunSpec:
     hyperparams: str = "paper"
     timesteps: int | None = None
     observation: str = "paper"
+    overrides: tuple[tuple[str, str], ...] = ()
 
     @property
     def _suffix(self) -> str:
@@ -75,7 +79,15 @@ class RunSpec:
             (f"_{self.tag}" if self.tag else "")
             + (f"_{self.hyperparams}" if self.hyperparams != "paper" else "")
             + (f"_{self.observation}" if self.observation != "paper" else "")
+            + (f"_hp{hashlib.sha256(repr(self.overrides).encode()).hexdigest()[:8]}" if self.overrides else "")
         )
+
+    @property
+    def override_kwargs(self) -> dict[str, Any]:
+        """:return: :attr:`overrides` as constructor keyword arguments"""
+        from sb3_dtdpg.overrides import parse_value
+
+        return {name: parse_value(text) for name, text in self.overrides}
 
     @property
     def run_id(self) -> str:
@@ -121,6 +133,7 @@ def _hyperparameters(spec: RunSpec) -> dict[str, Any]:
         values["noise_sigma"] = baselines.TD3_NOISE_SIGMA
     if spec.hyperparams == "tuned":
         values.update(baselines.TUNED_KWARGS)
+    values.update(spec.override_kwargs)
     return values
 
 
@@ -144,7 +157,8 @@ def run_identity(spec: RunSpec) -> dict[str, Any]:
         scenario = gym.spec(spec.env_id).kwargs.get("scenario", "mall")
     identity = {
         "format": RUN_FORMAT_VERSION,
-        "spec": dataclasses.asdict(spec),
+        # without overrides the spec is stored as before they existed, so earlier results stay this run's
+        "spec": {k: v for k, v in dataclasses.asdict(spec).items() if k != "overrides" or spec.overrides},
         "scenario": noma_radiomap.load_scenario(scenario).to_dict(),
         "hyperparameters": _hyperparameters(spec),
     }

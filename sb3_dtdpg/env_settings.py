@@ -1,0 +1,133 @@
+"""The mission-env settings a model was trained with, saved with it and checked when it meets an env again.
+
+A policy trained on one observation layout or downlink mode means nothing on another, and two layouts of
+the same length (NOMA and OMA) would load silently. :func:`settings_of` reads the settings of a mission env
+(:data:`SETTINGS`: scenario, observation, multiple_access, channel, task); a model stores them in its
+``env_settings`` attribute, which SB3's ``save`` writes into the zip like any other attribute (``DTDPG.save``
+fills it in; :func:`record` does it for any SB3 model). :func:`check_settings` refuses an env whose settings
+differ, naming the ``gymnasium.make`` keyword arguments to use.
+
+The training channel is recorded but not checked: a model trained on the radio map is tested with Rayleigh
+fading (the paper's protocol). Envs that are not mission envs have no settings and are never refused here.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["CHECKED", "SETTINGS", "EnvSettingsMismatch", "check_settings", "infer_observation", "record", "settings_of"]
+
+#: What is recorded.
+SETTINGS: tuple[str, ...] = ("scenario", "observation", "multiple_access", "channel", "task")
+#: What must match for a model to be used on an env (the channel may differ: train on the map, test with fading).
+CHECKED: tuple[str, ...] = ("scenario", "observation", "multiple_access", "task")
+
+
+class EnvSettingsMismatch(ValueError):
+    """A model meets an env built with other settings than it was trained with."""
+
+
+def _single_env(env: Any) -> Any:
+    """The first single env behind an SB3 ``VecEnv`` (and its wrappers), or ``env`` itself."""
+    while hasattr(env, "venv"):  # VecEnvWrapper (VecNormalize, VecMonitor, ...)
+        env = env.venv
+    if hasattr(env, "envs") and env.envs:  # DummyVecEnv
+        return env.envs[0]
+    return env
+
+
+def _observation_of(env: Any) -> str | None:
+    """The layout an agent sees: the env's own, or ``goal`` behind a ``RelativeGoalObservation`` wrapper."""
+    from noma_radiomap.wrappers import RelativeGoalObservation
+
+    layer = env
+    while layer is not None:
+        if isinstance(layer, RelativeGoalObservation):
+            return "goal"
+        if isinstance(getattr(layer, "observation", None), str):  # the envs and the batched envs say it themselves
+            return layer.observation
+        layer = getattr(layer, "env", None) or getattr(layer, "vec_env", None)
+    return None
+
+
+def settings_of(env: Any) -> dict[str, Any] | None:
+    """
+    :param env: a Gymnasium env, an SB3 ``VecEnv`` or :class:`sb3_dtdpg.vec_env.MissionVecEnv` (or None)
+    :return: the env's :data:`SETTINGS` (``scenario`` is the scenario's name), or None for an env that is not a
+        NomaRadioMap mission env
+    """
+    if env is None:
+        return None
+    single = _single_env(env)
+    base = getattr(single, "vec_env", None) or getattr(single, "unwrapped", single)
+    # the batched NomaRadioMapVecEnv keeps its settings in its mission core
+    base = next(
+        (c for c in (base, getattr(base, "core", None)) if hasattr(c, "scenario") and hasattr(c, "multiple_access")), None
+    )
+    if base is None:
+        return None
+    scenario = base.scenario
+    return {
+        "scenario": getattr(scenario, "name", str(scenario)),
+        "observation": _observation_of(single),
+        "multiple_access": base.multiple_access,
+        "channel": getattr(base, "channel", None),
+        "task": getattr(base, "task", None),
+    }
+
+
+def record(model: Any, env: Any = None) -> dict[str, Any] | None:
+    """
+    Store the settings of ``env`` (default: the model's own env) in ``model.env_settings``, saved by ``save``.
+
+    Without an env (a model loaded without one) the recorded settings are kept.
+
+    :param model: an SB3 model
+    :param env: the env it was trained on
+    :return: the recorded settings
+    """
+    settings = settings_of(env if env is not None else model.get_env())
+    if settings is not None:
+        model.env_settings = settings
+    return getattr(model, "env_settings", None)
+
+
+def infer_observation(n_values: int, n_robots: int) -> str | None:
+    """
+    :param n_values: length of a flat observation
+    :param n_robots: robots of the scenario
+    :return: the layout with that length, or None
+    """
+    from noma_radiomap.observations import OBSERVATIONS
+
+    return next((name for name, per_robot in OBSERVATIONS.items() if per_robot * n_robots == n_values), None)
+
+
+def _make_call(settings: dict[str, Any]) -> str:
+    keys = ("scenario", "observation", "multiple_access", "task")
+    arguments = ", ".join(f"{key}={settings[key]!r}" for key in keys if settings.get(key) is not None)
+    return f'gym.make("NomaRadioMap-v0", {arguments})'
+
+
+def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the model") -> None:
+    """
+    :param recorded: the settings a model was trained with (None: nothing recorded, nothing to check)
+    :param env: the env it is about to be used on
+    :param what: the model, for the message (e.g. its path)
+    :raises EnvSettingsMismatch: when a :data:`CHECKED` setting differs; the message names every differing
+        setting and the ``gymnasium.make`` call that builds a matching env
+    """
+    actual = settings_of(env)
+    if not recorded or actual is None:
+        return
+    differences = [
+        f"{key}={recorded[key]!r} (the env has {actual.get(key)!r})"
+        for key in CHECKED
+        if recorded.get(key) is not None and recorded.get(key) != actual.get(key)
+    ]
+    if differences:
+        raise EnvSettingsMismatch(
+            f"{what} was trained with {', '.join(differences)}; build the env with those settings, e.g. "
+            f"{_make_call(recorded)} (sb3-dtdpg: --observation {recorded.get('observation')} "
+            f"--multiple-access {recorded.get('multiple_access')})"
+        )

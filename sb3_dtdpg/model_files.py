@@ -1,0 +1,103 @@
+"""Reading a saved model for ``sb3-dtdpg evaluate`` / ``enjoy``: its algorithm, its env settings, the env to use.
+
+A model may come from ``sb3-dtdpg train``/``compare`` (``<out>/runs/<run id>/model.zip``, beside a
+``result.json`` that names the run's settings), from the RL Zoo (``logs/<algo>/<env>_<n>/<env>.zip``) or from
+``model.save`` in Python. The settings come from, in order: the zip's ``env_settings`` (every DT-DPG model,
+:mod:`sb3_dtdpg.env_settings`), the run's ``result.json``, and the observation length (the layout that has it).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+__all__ = ["SavedModel", "read_saved_model"]
+
+#: The algorithm of a policy class name (SB3 stores the policy class in the zip).
+_POLICY_ALGOS = {"DTDPGPolicy": "dtdpg", "TD3Policy": "td3", "SACPolicy": "sac", "TQCPolicy": "tqc"}
+
+
+class SavedModel:
+    """
+    A model file and what it says about itself.
+
+    :param path: the zip
+    :param algo: one of :data:`sb3_dtdpg.baselines.ALGORITHMS`
+    :param settings: the env settings it was trained with (:data:`sb3_dtdpg.env_settings.SETTINGS`), None where unknown
+    :param env_id: the env id it was trained on, where known
+    :param source: where the settings come from, for messages
+    """
+
+    def __init__(self, path: Path, algo: str, settings: dict[str, Any] | None, env_id: str | None, source: str) -> None:
+        self.path, self.algo, self.settings, self.env_id, self.source = path, algo, settings, env_id, source
+
+    def load(self, env: Any) -> Any:
+        """:return: the model, loaded onto ``env`` after checking the env's settings against the recorded ones"""
+        from sb3_dtdpg.baselines import algorithm_class
+        from sb3_dtdpg.env_settings import check_settings
+
+        check_settings(self.settings, env, f"the model {self.path}")
+        return algorithm_class(self.algo).load(self.path, env=env, device="cpu")
+
+
+def _model_path(path: str | Path) -> Path:
+    path = Path(path)
+    if path.is_dir():
+        if not (path / "model.zip").is_file():
+            raise ValueError(f"{path} is a folder without a model.zip (give the model file, e.g. <run folder>/model.zip)")
+        path = path / "model.zip"
+    elif not path.is_file():
+        raise ValueError(f"{path}: no such model file")
+    return path
+
+
+def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
+    """
+    :param path: a model zip, or a run folder holding ``model.zip``
+    :param algo: the algorithm (None: from the run's ``result.json``, else from the zip's policy class; a TD3
+        policy is loaded as TD3, which predicts like DDPG)
+    :return: the model file's description
+    :raises ValueError: a missing file, a file that is not an SB3 model zip, or an unknown algorithm
+    """
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    path = _model_path(path)
+    try:
+        data, _, _ = load_from_zip_file(path, load_data=True, device="cpu")
+    except Exception as error:  # zipfile, pickle and torch raise many kinds of errors for a file that is not a model
+        raise ValueError(f"{path}: not a Stable-Baselines3 model file ({type(error).__name__}: {error})") from None
+    data = data or {}
+    result_file = path.parent / "result.json"
+    spec: dict[str, Any] = {}
+    if result_file.is_file():
+        spec = json.loads(result_file.read_text()).get("spec", {})
+    policy_class = getattr(data.get("policy_class"), "__name__", "")
+    algo = algo or spec.get("algo") or _POLICY_ALGOS.get(policy_class)
+    if algo is None:
+        raise ValueError(f"{path}: cannot tell the algorithm from its policy class {policy_class!r}; give --algo")
+    settings, source = data.get("env_settings"), "the model file"
+    if settings is None and spec:
+        settings = {
+            "scenario": spec.get("scenario") or "mall",
+            "observation": spec.get("observation", "paper"),
+            "multiple_access": spec.get("multiple_access"),
+            "channel": spec.get("channel"),
+            "task": spec.get("task"),
+        }
+        source = str(result_file)
+    if settings is None:
+        settings, source = _settings_from_space(data.get("observation_space")), "the observation length"
+    return SavedModel(path, algo, settings, spec.get("env_id"), source)
+
+
+def _settings_from_space(space: Any) -> dict[str, Any] | None:
+    """The observation layout of a flat Box observation on the default scenario (``mall``), where its length tells."""
+    from noma_radiomap import load_scenario
+    from sb3_dtdpg.env_settings import infer_observation
+
+    shape = getattr(space, "shape", None)
+    if not shape or len(shape) != 1:
+        return None
+    observation = infer_observation(int(shape[0]), len(load_scenario("mall").robots))
+    return None if observation is None else {"observation": observation}

@@ -1,0 +1,125 @@
+"""Hyperparameter overrides given as text, checked before anything is built.
+
+``sb3-dtdpg train --hyperparams learning_rate:3e-4 batch_size:256`` takes the RL Zoo's ``key:value`` form
+(``rl_zoo3``'s ``StoreDict``). The zoo evaluates each value as Python; here a value is a Python literal
+(``3e-4``, ``True``, ``[64, 64]``, ``'text'``) or ``dict(key=literal, ...)`` (the zoo's ``policy_kwargs`` form),
+read with :mod:`ast`, so a command line runs no code.
+
+:func:`check_constructor_kwargs` is the check both the CLI and ``python -m sb3_dtdpg.train`` run on a set of
+keyword arguments before the model is built: an unknown name gets a did-you-mean (a typo such as
+``learnin_rate`` would otherwise be a ``TypeError`` from deep inside SB3), and a network larger than
+:data:`MAX_NETWORK_PARAMETERS` is refused before torch tries to allocate it.
+"""
+
+from __future__ import annotations
+
+import ast
+import difflib
+import inspect
+import itertools
+import math
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+__all__ = [
+    "MAX_NETWORK_PARAMETERS",
+    "HyperparameterError",
+    "check_constructor_kwargs",
+    "parse_overrides",
+    "parse_value",
+]
+
+#: The most weights one hidden-layer stack of ``net_arch`` may have (products of consecutive layer sizes):
+#: 20 million, 80 MB of float32 per network, about 1 GB with the actor, critic, their targets and Adam's state.
+MAX_NETWORK_PARAMETERS = 20_000_000
+#: Names the constructor never sees: the model's own positional arguments.
+_NOT_KWARGS = ("self", "policy", "env")
+
+
+class HyperparameterError(ValueError):
+    """A hyperparameter override or file entry that cannot be used (named, with the value)."""
+
+
+def _literal(node: ast.AST, text: str) -> Any:
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" and not node.args:
+        if any(keyword.arg is None for keyword in node.keywords):
+            raise HyperparameterError(f"{text!r}: dict(**...) is not a literal")
+        return {keyword.arg: _literal(keyword.value, text) for keyword in node.keywords}
+    try:
+        return ast.literal_eval(node)
+    except ValueError:
+        raise HyperparameterError(
+            f"{text!r} is not a Python literal (a number, True/False/None, a quoted string, a list, a dict or dict(k=v))"
+        ) from None
+
+
+def parse_value(text: str) -> Any:
+    """
+    :param text: a value as typed, e.g. ``3e-4``, ``[64, 64]``, ``dict(net_arch=[64, 64])``
+    :return: the value; a bare word that is not a literal (``relabel``) is kept as that string
+    :raises HyperparameterError: when the text is an expression other than a literal
+    """
+    try:
+        node = ast.parse(text.strip(), mode="eval").body
+    except SyntaxError:
+        raise HyperparameterError(f"{text!r} is not a Python literal") from None
+    if isinstance(node, ast.Name):  # a bare word: the zoo's strings are usually quoted, accept it unquoted too
+        return {"True": True, "False": False, "None": None}.get(node.id, node.id)
+    return _literal(node, text)
+
+
+def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
+    """
+    :param items: ``key:value`` strings (the RL Zoo's ``--hyperparams`` form)
+    :return: the overrides, in order (a repeated key keeps its last value)
+    :raises HyperparameterError: an item without ``:``, with an empty key or a value that is not a literal
+    """
+    overrides: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition(":")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise HyperparameterError(f"{item!r}: expected key:value, e.g. learning_rate:3e-4")
+        overrides[key] = parse_value(value)
+    return overrides
+
+
+def _check_net_arch(net_arch: Any, where: str) -> None:
+    stacks = net_arch.values() if isinstance(net_arch, dict) else [net_arch]
+    for stack in stacks:
+        if not isinstance(stack, Sequence) or isinstance(stack, str):
+            raise HyperparameterError(f"net_arch{where}: expected a list of layer sizes, got {net_arch!r}")
+        for size in stack:
+            if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+                raise HyperparameterError(f"net_arch{where}: layer sizes must be positive integers, got {size!r}")
+        weights = sum(a * b for a, b in itertools.pairwise(stack)) + sum(stack)
+        if weights > MAX_NETWORK_PARAMETERS:
+            raise HyperparameterError(
+                f"net_arch{where}: {list(stack)} has {weights:.3g} weights in its hidden layers alone, more than the "
+                f"{MAX_NETWORK_PARAMETERS:,} allowed (sb3_dtdpg.overrides.MAX_NETWORK_PARAMETERS)"
+            )
+
+
+def check_constructor_kwargs(algo_class: type, kwargs: dict[str, Any], where: str = "", extra: Sequence[str] = ()) -> None:
+    """
+    Check keyword arguments for ``algo_class(policy, env, **kwargs)`` before it is called.
+
+    :param algo_class: an SB3 algorithm class (``DTDPG``, ``DDPG``, ...)
+    :param kwargs: the keyword arguments
+    :param where: where they come from, for the message (e.g. ``" in zoo_configs/dtdpg.yml"``)
+    :param extra: further names that are valid besides the constructor's (e.g. the zoo's own keys)
+    :raises HyperparameterError: an unknown name (with the closest known ones), a learning rate that is not a
+        positive finite number, or a ``policy_kwargs`` ``net_arch`` that is malformed or too large
+    """
+    known = [name for name in inspect.signature(algo_class).parameters if name not in _NOT_KWARGS] + list(extra)
+    for name in kwargs:
+        if name not in known:
+            close = difflib.get_close_matches(name, known, n=3)
+            hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+            raise HyperparameterError(f"unknown hyperparameter {name!r} for {algo_class.__name__}{where}{hint}")
+    rate = kwargs.get("learning_rate")
+    if isinstance(rate, bool) or (isinstance(rate, (int, float)) and not (math.isfinite(rate) and rate > 0)):
+        raise HyperparameterError(f"learning_rate{where} must be a positive finite number, got {rate!r}")
+    policy_kwargs = kwargs.get("policy_kwargs")
+    if isinstance(policy_kwargs, dict) and "net_arch" in policy_kwargs:
+        _check_net_arch(policy_kwargs["net_arch"], where)

@@ -1,0 +1,152 @@
+"""An animation of one mission: the robots' paths over the SINR map, the power split and the outage steps.
+
+``sb3-dtdpg enjoy MODEL --record mission.gif`` uses it. It draws off-screen (matplotlib's Agg canvas, no
+display needed) and writes with matplotlib's own writers: ``.gif`` with ``PillowWriter`` (pillow comes with
+matplotlib), ``.mp4`` with ``FFMpegWriter`` (needs an ``ffmpeg`` program on the ``PATH``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["MissionTrace", "record_mission", "run_mission", "save_animation"]
+
+_ROBOT_COLORS = ("magenta", "cyan", "white", "lime", "pink", "deepskyblue")
+
+
+@dataclass
+class MissionTrace:
+    """
+    What one mission did, step by step (``T`` steps, ``U`` robots).
+
+    :param positions: robot positions, shape (T + 1, U, 2), metres
+    :param power_w: allocated transmit power per step, shape (T, U), watts
+    :param outage: whether each robot was in outage at each step, shape (T, U)
+    :param destinations: shape (U, 2)
+    :param info: the last step's ``info`` (``is_success``, ``mqi``, ...)
+    """
+
+    positions: np.ndarray
+    power_w: np.ndarray
+    outage: np.ndarray
+    destinations: np.ndarray
+    info: dict[str, Any]
+
+
+def run_mission(model: Any, env: Any, seed: int, deterministic: bool = True) -> MissionTrace:
+    """
+    :param model: anything with SB3's ``predict``
+    :param env: a (wrapped) NomaRadioMap env
+    :param seed: the reset seed (the mission and its fading)
+    :param deterministic: passed to ``predict``
+    :return: the mission's trace
+    """
+    obs, _ = env.reset(seed=seed)
+    base = env.unwrapped
+    positions = [np.array(base.positions, dtype=np.float64)]
+    power, outage, done, info = [], [], False, {}
+    while not done:
+        action, _ = model.predict(obs, deterministic=deterministic)
+        obs, _, terminated, truncated, info = env.step(action)
+        positions.append(np.array(base.positions, dtype=np.float64))
+        power.append(np.asarray(info["power_w"], dtype=np.float64))
+        outage.append(np.asarray(info["outage"], dtype=bool))
+        done = terminated or truncated
+    return MissionTrace(np.stack(positions), np.stack(power), np.stack(outage), np.array(base.destinations), info)
+
+
+def save_animation(env: Any, trace: MissionTrace, path: str | Path, fps: int = 10, max_frames: int = 120) -> int:
+    """
+    Write the mission as an animation.
+
+    :param env: the env the trace comes from (its radio map is the background)
+    :param trace: see :func:`run_mission`
+    :param path: ``.gif`` or ``.mp4``
+    :param fps: frames per second
+    :param max_frames: at most this many frames (long missions show every k-th step; the last is always shown)
+    :return: the number of frames written
+    :raises ValueError: another suffix, or ``.mp4`` without ffmpeg
+    """
+    from matplotlib import animation
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    path = Path(path)
+    if path.suffix.lower() == ".gif":
+        writer: Any = animation.PillowWriter(fps=fps)
+    elif path.suffix.lower() == ".mp4":
+        if not animation.FFMpegWriter.isAvailable():
+            raise ValueError(f"{path}: writing .mp4 needs the ffmpeg program on the PATH; record a .gif instead")
+        writer = animation.FFMpegWriter(fps=fps)
+    else:
+        raise ValueError(f"{path}: the recording must be a .gif or .mp4 file, got suffix {path.suffix!r}")
+    base = env.unwrapped
+    steps, n_robots = trace.power_w.shape
+    frames = sorted({*np.linspace(0, steps, num=min(steps + 1, max_frames)).round().astype(int).tolist(), steps})
+
+    figure = Figure(figsize=(10.0, 5.2), dpi=72, layout="constrained")
+    FigureCanvasAgg(figure)
+    ax_map, ax_power = figure.subplots(1, 2, width_ratios=(1.6, 1.0))
+    base.radio_map.plot(ax_map, kind="sinr", colorbar=True, legend=False)
+    colors = [_ROBOT_COLORS[u % len(_ROBOT_COLORS)] for u in range(n_robots)]
+    for u, color in enumerate(colors):
+        x, y = trace.destinations[u]
+        ax_map.plot([x], [y], "P", color=color, mec="black", ms=11)
+        ax_map.plot(*trace.positions[0, u], "s", color=color, mec="black", ms=7)
+    trails = [ax_map.plot([], [], "-", color=c, lw=1.5)[0] for c in colors]
+    robots = [ax_map.plot([], [], "o", color=c, mec="black", ms=9, label=f"robot {u}")[0] for u, c in enumerate(colors)]
+    outages = ax_map.scatter([], [], marker="x", color="red", s=18, label="outage", zorder=5)
+    starts = ax_map.plot([], [], "s", color="gray", mec="black", ms=7, label="start")[0]
+    goals = ax_map.plot([], [], "P", color="gray", mec="black", ms=10, label="destination")[0]
+    ax_map.legend(
+        handles=[*robots, starts, goals, outages], loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=4, fontsize=7
+    )
+    title = ax_map.set_title("")
+
+    time = np.arange(1, steps + 1)
+    share = trace.power_w / np.maximum(trace.power_w.sum(axis=1, keepdims=True), 1e-12)
+    ax_power.stackplot(
+        time, share.T, colors=colors, edgecolor="black", linewidth=0.2, labels=[f"robot {u}" for u in range(n_robots)]
+    )
+    for u, color in enumerate(colors):  # a strip per robot above the shares: red where it was in outage
+        low = 1.02 + 0.04 * u
+        ax_power.fill_between(time, low, low + 0.03, color=color, step="mid", lw=0)
+        ax_power.fill_between(time, low, low + 0.03, where=trace.outage[:, u], color="red", step="mid", lw=0)
+    ax_power.plot([], [], "s", color="red", label="outage (strips above: one per robot)")
+    ax_power.set(xlim=(0, max(steps, 1)), ylim=(0, 1.04 + 0.04 * n_robots), xlabel="step", ylabel="share of the AP's power")
+    ax_power.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=7)
+    cursor = ax_power.axvline(0, color="black", lw=1)
+    outage_points = [(t, u) for t in range(steps) for u in range(n_robots) if trace.outage[t, u]]
+
+    def draw(t: int) -> None:
+        for u in range(n_robots):
+            trails[u].set_data(trace.positions[: t + 1, u, 0], trace.positions[: t + 1, u, 1])
+            robots[u].set_data([trace.positions[t, u, 0]], [trace.positions[t, u, 1]])
+        shown = [trace.positions[s + 1, u] for s, u in outage_points if s < t]
+        outages.set_offsets(np.array(shown).reshape(-1, 2))
+        cursor.set_xdata([t, t])
+        outage_steps = int(trace.outage[:t].sum())
+        title.set_text(
+            f"{base.scenario.name}, {base.multiple_access.upper()}: step {t}/{steps}, outage steps {outage_steps}"
+            + (f", MQI {float(trace.info['mqi']):.1f}" if t == steps and "mqi" in trace.info else "")
+        )
+
+    movie = animation.FuncAnimation(figure, draw, frames=frames, blit=False)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    movie.save(str(path), writer=writer)
+    return len(frames)
+
+
+def record_mission(model: Any, env: Any, path: str | Path, seed: int, fps: int = 10, max_frames: int = 120) -> MissionTrace:
+    """
+    Run one mission with ``model`` and write its animation to ``path`` (:func:`run_mission`, :func:`save_animation`).
+
+    :return: the mission's trace
+    """
+    trace = run_mission(model, env, seed)
+    save_animation(env, trace, path, fps=fps, max_frames=max_frames)
+    return trace

@@ -1,0 +1,176 @@
+"""User errors of the command line: one ``error:`` line of the subcommand, exit status 2, nothing created."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sb3_dtdpg import cli
+from sb3_dtdpg.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_cli(argv, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    return exit_info.value.code, capsys.readouterr()
+
+
+def assert_one_error_line(code, printed, command, message):
+    assert code == 2
+    assert "Traceback" not in printed.err
+    errors = [line for line in printed.err.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith(f"sb3-dtdpg {command}: error: "), printed.err
+    assert message in errors[0]
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--seed", "-1"], "expected a seed in 0..4294967295"),
+        (["--seed", "99999999999999999999"], "expected a seed in 0..4294967295"),
+        (["--eval-seed", "-5"], "expected a seed in 0..4294967295"),
+        (["--learning-rate", "nan"], "expected a positive finite learning rate, got 'nan'"),
+        (["--learning-rate", "-1"], "expected a positive finite learning rate, got '-1'"),
+        (["--learning-rate", "inf"], "expected a positive finite learning rate, got 'inf'"),
+        (["--threads", "-1"], "expected 0 (torch's default) or a positive number of threads"),
+        (["--hyperparams", "learnin_rate:1e-3"], "unknown hyperparameter 'learnin_rate' for DTDPG"),
+        (["--hyperparams", "learning_rate:0"], "learning_rate (--hyperparams) must be a positive finite number"),
+        (["--hyperparams", "policy_kwargs:dict(net_arch=[100000, 100000])"], "more than the 20,000,000 allowed"),
+        (["--hyperparams", "batch_size"], "expected key:value"),
+        (["--hyperparams", "gamma:__import__('os')"], "is not a Python literal"),
+        (["--n-seed", "3"], "unrecognized arguments: --n-seed 3"),  # no abbreviations, the subcommand's error
+        (["--bogus"], "unrecognized arguments: --bogus"),
+    ],
+)
+def test_train_user_errors_create_nothing(extra, message, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # the default --out and --tb are relative: nothing may appear here
+    code, printed = run_cli(["train", "--algo", "dtdpg", "--scenario", "small", "--episodes", "40", *extra], capsys)
+    assert_one_error_line(code, printed, "train", message)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_did_you_mean_names_the_right_key(capsys):
+    code, printed = run_cli(["train", "--algo", "ddpg", "--hyperparams", "bach_size:64"], capsys)
+    assert_one_error_line(code, printed, "train", "did you mean 'batch_size'")
+
+
+@pytest.mark.parametrize("command", ["compare", "reproduce"])
+def test_abbreviations_are_not_accepted(command, capsys):
+    code, printed = run_cli([command, "--n-seed", "3"], capsys)
+    assert_one_error_line(code, printed, command, "unrecognized arguments: --n-seed 3")
+
+
+def test_a_folder_in_use_is_a_user_error(tmp_path, capsys):
+    from sb3_dtdpg.experiments.runs import output_lock
+
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with output_lock(tmp_path):
+        code, printed = run_cli(["compare", "--budget", "tiny", "--out", str(tmp_path), "--no-progress"], capsys)
+    assert_one_error_line(code, printed, "compare", "is in use by another job")
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name != ".lock") == before
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this platform")
+def test_a_scenario_that_is_a_folder_or_a_fifo_says_so(tmp_path, capsys):
+    code, printed = run_cli(["map", "--scenario", str(tmp_path)], capsys)
+    assert_one_error_line(code, printed, "map", "is a folder: give a scenario YAML file or a built-in name")
+    fifo = tmp_path / "scenario.yaml"
+    os.mkfifo(fifo)
+    code, printed = run_cli(["map", "--scenario", str(fifo)], capsys)
+    assert_one_error_line(code, printed, "map", "is not a regular file (a FIFO, socket or device)")
+
+
+def test_a_bare_builtin_name_is_the_builtin_and_a_path_is_the_file(tmp_path, monkeypatch, capsys):
+    from noma_radiomap import load_scenario
+
+    text = (REPO / "envs" / "noma_radiomap" / "scenarios" / "small.yaml").read_text()
+    (tmp_path / "small").write_text(text.replace("name: small", "name: my_small", 1))
+    monkeypatch.chdir(tmp_path)
+    assert load_scenario("small").name == "small"
+    assert load_scenario("./small").name == "my_small"
+    args = cli.build_parser().parse_args(["map", "--scenario", "small"])
+    assert args.scenario == "small"
+    assert "for the file 'small' here write ./small" in capsys.readouterr().err
+
+
+def test_presets_have_their_own_flag_and_the_old_spelling_warns(capsys):
+    parser = cli.build_parser()
+    args = parser.parse_args(["compare", "--preset", "paper"])
+    cli._split_hyperparams(args)
+    assert (args.preset, args.overrides) == ("paper", {})
+    args = parser.parse_args(["train", "--algo", "dtdpg", "--hyperparams", "batch_size:256", "gamma:0.9"])
+    cli._split_hyperparams(args)
+    assert args.preset is None and args.overrides == {"batch_size": 256, "gamma": 0.9}
+    args = parser.parse_args(["train", "--algo", "dtdpg", "--hyperparams", "tuned"])
+    cli._split_hyperparams(args)
+    assert args.preset == "tuned" and "--hyperparams tuned is deprecated, use --preset tuned" in capsys.readouterr().err
+    args = parser.parse_args(["compare", "--hyperparams", "paper"])  # compare and reproduce take whole presets
+    assert args.preset == "paper" and "--hyperparams is deprecated, use --preset" in capsys.readouterr().err
+
+
+def test_old_budget_names_are_aliases_of_names_that_say_what_they_run(capsys):
+    from sb3_dtdpg.experiments.budgets import BUDGETS
+
+    assert cli.build_parser().parse_args(["compare", "--budget", "reduced"]).budget == "small-200"
+    assert "--budget reduced is deprecated, use --budget small-200" in capsys.readouterr().err
+    assert BUDGETS["small-200"].scenario == "small" and BUDGETS["mall-200"].scenario is None  # None: mall
+
+
+def test_overrides_reach_the_model(tmp_path, capsys):
+    from sb3_dtdpg import DTDPG
+
+    args = ["train", "--algo", "dtdpg", "--preset", "paper", "--env", "Pendulum-v1", "--timesteps", "120"]
+    args += ["--hyperparams", "learning_starts:50", "batch_size:16", "policy_kwargs:dict(net_arch=[8, 8])"]
+    args += ["--eval-episodes", "1", "--no-progress", "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]
+    assert main(args) == 0
+    model = DTDPG.load(tmp_path / "dtdpg_Pendulum-v1_s0.zip")
+    assert (model.learning_starts, model.batch_size) == (50, 16)
+    assert model.policy.actor.mu[0].out_features == 8
+
+
+def test_the_option_choices_are_the_libraries(monkeypatch):
+    from noma_radiomap.registration import OBSERVATIONS
+    from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID, HYPERPARAMS
+
+    assert cli._ALGORITHMS == ALGORITHMS and cli._OBSERVATIONS == OBSERVATIONS
+    assert set(cli._PRESETS) == set(HYPERPARAMS) and cli._DEFAULT_ENV_ID == DEFAULT_ENV_ID
+
+
+def test_help_imports_neither_torch_nor_sb3():
+    code = (
+        "import sys, contextlib, io\n"
+        "from sb3_dtdpg.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "    main(['--help'])\n"
+        "print(sorted(m for m in ('torch', 'stable_baselines3', 'noma_radiomap') if m in sys.modules))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "envs"), os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env).stdout
+    assert out.strip() == "[]"
+
+
+def test_subcommand_help_lists_the_budgets_when_shown(capsys):
+    code, printed = run_cli(["compare", "--help"], capsys)
+    assert code == 0
+    assert "tiny:" in printed.out and "episodes on small" in " ".join(printed.out.split())
+
+
+def test_overrides_reach_a_mission_run_and_name_it(tmp_path, capsys):
+    from stable_baselines3 import DDPG
+
+    from sb3_dtdpg.experiments.specs import RunSpec, run_identity
+
+    args = ["train", "--algo", "ddpg", "--preset", "paper", "--scenario", "small", "--episodes", "2"]
+    args += ["--hyperparams", "batch_size:16", "policy_kwargs:dict(net_arch=[8, 8])", "--eval-episodes", "1"]
+    args += ["--no-progress", "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]
+    assert main(args) == 0
+    (run,) = (tmp_path / "runs").iterdir()
+    assert run.name.startswith("ddpg_noma_s0_goal_hp")  # another run than the one without overrides
+    model = DDPG.load(run / "model.zip")
+    assert model.batch_size == 16 and model.policy.actor.mu[0].out_features == 8
+    # Without overrides the identity is what it was before overrides existed: earlier results stay valid
+    assert "overrides" not in run_identity(RunSpec("ddpg", "noma", 0, 2, scenario="small"))["spec"]

@@ -1,0 +1,142 @@
+"""A saved model records its env settings; ``sb3-dtdpg evaluate`` and ``enjoy --record`` use them."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+from stable_baselines3 import DDPG
+
+import noma_radiomap  # noqa: F401
+from sb3_dtdpg import DTDPG
+from sb3_dtdpg.cli import main
+from sb3_dtdpg.env_settings import EnvSettingsMismatch, record, settings_of
+from sb3_dtdpg.vec_env import make_mission_vec_env
+
+
+@pytest.fixture(autouse=True)
+def _agg_backend(monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+
+
+def small_env(**kwargs):
+    return gym.make("NomaRadioMap-v0", scenario="small", **kwargs)
+
+
+@pytest.fixture(scope="module")
+def saved_dtdpg(tmp_path_factory):
+    """A random-init DT-DPG on `small`, goal observation, NOMA, saved as it is."""
+    path = tmp_path_factory.mktemp("model") / "dtdpg.zip"
+    DTDPG("MlpPolicy", small_env(observation="goal"), seed=0).save(path)
+    return path
+
+
+def test_settings_of_the_envs():
+    assert settings_of(small_env(observation="goal", multiple_access="oma")) == {
+        "scenario": "small",
+        "observation": "goal",
+        "multiple_access": "oma",
+        "channel": "radio_map",
+        "task": "missions",
+    }
+    assert settings_of(small_env(observation="paper"))["observation"] == "paper"
+    vec = make_mission_vec_env("NomaRadioMap-v0", n_envs=2, seed=0, env_kwargs={"scenario": "small", "observation": "goal"})
+    assert settings_of(vec)["observation"] == "goal" and settings_of(vec)["scenario"] == "small"
+    assert settings_of(gym.make("Pendulum-v1")) is None
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "named"),
+    [
+        ({"observation": "paper"}, "observation='goal'"),
+        ({"observation": "goal", "multiple_access": "oma"}, "multiple_access='noma'"),
+    ],
+)
+def test_a_mismatched_env_is_refused_with_the_settings_to_use(saved_dtdpg, kwargs, named):
+    with pytest.raises(EnvSettingsMismatch, match=named) as error:
+        DTDPG.load(saved_dtdpg, env=small_env(**kwargs))
+    assert "observation='goal', multiple_access='noma'" in str(error.value)  # the gym.make call that fits
+    model = DTDPG.load(saved_dtdpg)
+    with pytest.raises(EnvSettingsMismatch, match=named):
+        model.set_env(small_env(**kwargs))
+
+
+def test_a_matching_env_loads_also_with_another_test_channel(saved_dtdpg):
+    model = DTDPG.load(saved_dtdpg, env=small_env(observation="goal", channel="rayleigh"))
+    assert model.env_settings["channel"] == "radio_map"  # recorded, not checked: test with fading
+
+
+def test_record_works_for_any_sb3_model(tmp_path):
+    model = DDPG("MlpPolicy", small_env(observation="goal", multiple_access="oma"), learning_starts=10)
+    record(model)
+    model.save(tmp_path / "ddpg.zip")
+    assert DDPG.load(tmp_path / "ddpg.zip").env_settings["multiple_access"] == "oma"
+
+
+def run_cli(argv, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    return exit_info.value.code, capsys.readouterr()
+
+
+def test_evaluate_prints_the_compare_table_and_writes_json_and_csv(saved_dtdpg, tmp_path, capsys):
+    out_json, out_csv = tmp_path / "eval.json", tmp_path / "eval.csv"
+    assert main(["evaluate", str(saved_dtdpg), "--n-episodes", "3", "--json", str(out_json), "--csv", str(out_csv)]) == 0
+    printed = capsys.readouterr().out
+    assert "DT-DPG" in printed and "Success (%)" in printed and "3 episodes" in printed
+    document = json.loads(out_json.read_text())
+    assert document["settings"]["scenario"] == "small" and document["settings"]["observation"] == "goal"
+    assert document["summary"]["n_episodes"] == 3 and len(document["episodes"]) == 3
+    episodes = pd.read_csv(out_csv)
+    assert list(episodes["seed"]) == [10_000, 10_001, 10_002]  # the test missions of compare
+    assert np.isclose(episodes["mqi"].mean(), document["summary"]["mqi"])
+
+
+def test_evaluate_refuses_a_mismatched_override(saved_dtdpg, capsys):
+    code, printed = run_cli(["evaluate", str(saved_dtdpg), "--multiple-access", "oma"], capsys)
+    assert code == 2 and "Traceback" not in printed.err
+    assert "sb3-dtdpg evaluate: error: " in printed.err and "--multiple-access noma" in printed.err
+
+
+def test_evaluate_a_missing_model_is_a_user_error(tmp_path, capsys):
+    code, printed = run_cli(["evaluate", str(tmp_path / "nope.zip")], capsys)
+    assert code == 2 and "no such model file" in printed.err
+
+
+def test_enjoy_records_a_viewable_gif(saved_dtdpg, tmp_path, capsys):
+    gif = tmp_path / "mission.gif"
+    assert main(["enjoy", str(saved_dtdpg), "--record", str(gif), "--max-frames", "6"]) == 0
+    assert "mission (seed 10000, small, NOMA, rayleigh)" in capsys.readouterr().out
+    with Image.open(gif) as image:
+        assert image.format == "GIF" and image.n_frames == 6
+        image.seek(image.n_frames - 1)
+        frame = np.asarray(image.convert("RGB"))
+    assert frame.shape[0] > 200 and frame.shape[1] > 400
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 20  # a drawn map, not a blank canvas
+
+
+def test_enjoy_refuses_another_suffix(saved_dtdpg, tmp_path, capsys):
+    code, printed = run_cli(["enjoy", str(saved_dtdpg), "--record", str(tmp_path / "m.avi")], capsys)
+    assert code == 2 and "expected a .gif or .mp4 file" in printed.err
+
+
+def test_settings_of_a_model_without_a_record_come_from_its_run_or_its_observation_length(tmp_path):
+    from sb3_dtdpg.model_files import read_saved_model
+
+    run = tmp_path / "runs" / "ddpg_oma_s0_goal"
+    run.mkdir(parents=True)
+    DDPG("MlpPolicy", small_env(observation="goal", multiple_access="oma"), learning_starts=10).save(run / "model.zip")
+    spec = {"algo": "ddpg", "scenario": "small", "observation": "goal", "multiple_access": "oma", "env_id": "NomaRadioMap-v0"}
+    (run / "result.json").write_text(json.dumps({"spec": spec}))
+    saved = read_saved_model(run)  # a run folder: its model.zip and result.json
+    assert saved.algo == "ddpg" and saved.source.endswith("result.json")
+    assert (saved.settings["multiple_access"], saved.settings["observation"]) == ("oma", "goal")
+    with pytest.raises(EnvSettingsMismatch, match="multiple_access='oma'"):
+        saved.load(small_env(observation="goal"))
+
+    bare = tmp_path / "bare.zip"
+    DDPG("MlpPolicy", gym.make("NomaRadioMap-v0", observation="paper"), learning_starts=10).save(bare)
+    saved = read_saved_model(bare, algo="ddpg")
+    assert saved.settings == {"observation": "paper"} and saved.source == "the observation length"  # 3 x 2 robots

@@ -1,0 +1,39 @@
+"""``python -m sb3_dtdpg.train``: a mistake in the hyperparameters is one error line, before any log folder."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rl_zoo3")
+REPO = Path(__file__).resolve().parents[1]
+
+
+def zoo_train(tmp_path, *args):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "envs"), os.environ.get("PYTHONPATH", "")])}
+    env["MPLBACKEND"] = "Agg"
+    command = [sys.executable, "-m", "sb3_dtdpg.train", "--algo", "dtdpg", "--env", "Pendulum-v1"]
+    command += ["-f", str(tmp_path / "logs")]
+    return subprocess.run([*command, *args], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+
+
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        ("  learnin_rate: 0.001\n", "unknown hyperparameter 'learnin_rate' for DTDPG (env Pendulum-v1 in "),
+        ('  policy_kwargs: "dict(net_arch=[100000, 100000])"\n', "more than the 20,000,000 allowed"),
+    ],
+)
+def test_a_bad_hyperparameter_file_is_one_error_line(tmp_path, entry, message):
+    config = tmp_path / "bad.yml"
+    config.write_text("Pendulum-v1:\n  n_timesteps: 1000\n  policy: MlpPolicy\n  learning_starts: 100\n" + entry)
+    done = zoo_train(tmp_path, "--conf-file", str(config))
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert "Traceback" not in done.stderr
+    errors = [line for line in done.stderr.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith("python -m sb3_dtdpg.train: error: ") and message in errors[0]
+    if "learnin_rate" in entry:
+        assert "did you mean 'learning_rate'" in errors[0]
+    assert not (tmp_path / "logs").exists()  # nothing created
