@@ -21,6 +21,7 @@ from sb3_dtdpg.experiments.compare import compare_specs, run_compare
 from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
 from sb3_dtdpg.experiments.runs import (
     BUDGETS,
+    RUN_FORMAT_VERSION,
     OutputBusyError,
     RunMismatchError,
     RunSpec,
@@ -93,7 +94,7 @@ def test_a_result_of_another_run_is_refused(tmp_path, change, pattern):
 def test_results_without_identity_or_of_older_format_are_refused(tmp_path):
     spec = compare_specs(BUDGETS["_micro"], 1)[0]
     _store(tmp_path, spec, identity=False)
-    with pytest.raises(RunMismatchError, match=r"format: 1 stored, 2 now"):
+    with pytest.raises(RunMismatchError, match=rf"format: 1 stored, {RUN_FORMAT_VERSION} now"):
         load_result(tmp_path, spec)
 
 
@@ -104,6 +105,10 @@ def test_hyperparameters_and_scenario_content_are_part_of_the_identity(tmp_path,
     before = run_identity(spec)
     monkeypatch.setitem(baselines.TUNED_KWARGS, "gamma", 0.9)
     assert run_identity(spec)["hyperparameters"]["gamma"] == 0.9 != before["hyperparameters"]["gamma"]
+    # what is recorded is what the model trains with: DT-DPG with Table I (recorded lr 1e-3 / batch 128 once)
+    paper = run_identity(RunSpec("dtdpg", "noma", 0, 3, scenario="small", hyperparams="paper"))["hyperparameters"]
+    assert (paper["learning_rate"], paper["batch_size"], paper["gamma"], paper["tau"]) == (1e-4, 64, 1.0, 0.002)
+    assert paper["buffer_size"] == 50_000 and paper["n_steps"] == 1
     # A scenario file edited since the run: same path, other content.
     path = tmp_path / "office.yaml"
     data = load_scenario("small").to_dict()

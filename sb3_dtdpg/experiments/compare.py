@@ -37,7 +37,7 @@ def compare_specs(
     modes: Sequence[str] = ("noma", "oma"),
     env_id: str = "NomaRadioMap-v0",
     hyperparams: str = "paper",
-    observation: str = "paper",
+    observation: str = "goal",
 ) -> list[RunSpec]:
     """:return: the runs of a comparison (every algorithm x mode x seed, trained on the radio map)"""
     return [
@@ -144,7 +144,7 @@ def run_compare(
     env_id: str = "NomaRadioMap-v0",
     scenario: str | None = None,
     hyperparams: str = "paper",
-    observation: str = "paper",
+    observation: str = "goal",
 ) -> pd.DataFrame:
     """
     Train and evaluate every algorithm x mode x seed (finished runs are kept), then write the tables and figures.
@@ -159,8 +159,8 @@ def run_compare(
     :param env_id: the env id
     :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
-    :param observation: ``"paper"`` (the paper's state) or ``"goal"`` (the goal-conditioned extension,
-        :class:`noma_radiomap.wrappers.RelativeGoalObservation`)
+    :param observation: ``"goal"`` (the goal-conditioned layout, the default), ``"destinations"`` or ``"paper"`` (Eq. (24);
+        docs/MODEL.md, "Observations")
     :return: the summary table (learners and planners)
     :raises ValueError: on a bad argument, or a budget that cannot train an algorithm (before any run starts)
     :raises OutputBusyError: another job is using ``out``

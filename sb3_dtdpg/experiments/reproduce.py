@@ -62,7 +62,7 @@ def _spec(
     episodes: int,
     lr: float | None = None,
     hyperparams: str = "paper",
-    observation: str = "paper",
+    observation: str = "goal",
 ) -> RunSpec:
     tag = f"{'radio_map' if channel == 'radio_map' else 'reality'}_{episodes}" + (f"_lr{lr:g}" if lr is not None else "")
     return RunSpec(
@@ -81,7 +81,7 @@ def _spec(
 
 
 def reproduce_specs(
-    budget: Budget, seeds: int, hyperparams: str = "paper", observation: str = "paper"
+    budget: Budget, seeds: int, hyperparams: str = "paper", observation: str = "goal"
 ) -> dict[str, list[RunSpec]]:
     """:return: the runs of every experiment, by experiment (a run may serve several experiments)"""
     e, long = budget.episodes, budget.long_episodes
@@ -215,7 +215,7 @@ def run_reproduce(
     progress: bool = True,
     train: bool = True,
     hyperparams: str = "paper",
-    observation: str = "paper",
+    observation: str = "goal",
     experiments: Sequence[str] | None = None,
 ) -> dict[str, pd.DataFrame]:
     """
@@ -229,7 +229,7 @@ def run_reproduce(
     :param progress: progress bars and printed tables
     :param train: run the unfinished runs; False only re-draws the tables and figures from the finished ones
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
-    :param observation: ``"paper"`` (the paper's state) or ``"goal"`` (the goal-conditioned extension)
+    :param observation: ``"goal"`` (the goal-conditioned layout, the default), ``"destinations"`` or ``"paper"`` (Eq. (24))
     :param experiments: train only the runs of these experiments (names of :data:`EXPERIMENTS`; None: all); the
         tables and figures are drawn from every finished run either way
     :return: the tables, by name

@@ -40,7 +40,14 @@ from sb3_dtdpg.experiments.run_callbacks import (
     RunProgress,
     check_finite,
 )
-from sb3_dtdpg.experiments.specs import RUN_FORMAT_VERSION, RunDivergedError, RunMismatchError, RunSpec, run_identity
+from sb3_dtdpg.experiments.specs import (
+    RUN_FORMAT_VERSION,
+    RunDivergedError,
+    RunMismatchError,
+    RunSpec,
+    build_model,
+    run_identity,
+)
 from sb3_dtdpg.experiments.storage import (
     OutputBusyError,
     clear_checkpoints,
@@ -111,7 +118,7 @@ def _evaluation_record(result: Any, n_trajectories: int, reward_phase: str) -> d
 
 def _build_model(spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None, verbose: int) -> tuple[Any, Any, int]:
     """:return: the training env, the model (new, or loaded from the checkpoint) and the episodes already trained"""
-    from sb3_dtdpg.baselines import algorithm_class, make_env, make_model
+    from sb3_dtdpg.baselines import algorithm_class, make_env
 
     env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
     if checkpoint is not None:
@@ -126,20 +133,7 @@ def _build_model(spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None
                 f"delete {run_dir / 'checkpoint.json'} to start the run afresh"
             ) from error
         return env, model, int(checkpoint["episodes"])
-    destination_episodes = None
-    if spec.algo == "dtdpg":
-        destination_episodes = spec.destination_episodes or max(1, round(0.6 * spec.episodes))
-    model = make_model(
-        spec.algo,
-        env,
-        seed=spec.seed,
-        learning_rate=spec.learning_rate,
-        destination_episodes=destination_episodes,
-        hyperparams=spec.hyperparams,
-        verbose=verbose,
-        **({"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}),
-        **spec.override_kwargs,
-    )
+    model = build_model(spec, env, verbose=verbose, **({"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}))
     return env, model, 0
 
 

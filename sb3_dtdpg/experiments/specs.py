@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import inspect
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,8 @@ from sb3_dtdpg.common.files import json_default
 __all__ = ["RUN_FORMAT_VERSION", "RunDivergedError", "RunMismatchError", "RunSpec", "check_identity", "run_identity"]
 
 #: Version of what a run is and what its result file holds; results of another version are not reused.
-RUN_FORMAT_VERSION = 2
+#: 3: the hyperparameters are read back from the built model (:func:`sb3_dtdpg.presets.model_settings`).
+RUN_FORMAT_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -47,8 +47,10 @@ class RunSpec:
         phase (the "before transfer" trajectories of the paper's Fig. 5b)
     :param hyperparams: hyperparameter set of :func:`sb3_dtdpg.baselines.make_model` (``"paper"`` or ``"tuned"``)
     :param timesteps: train for this many timesteps instead of ``episodes`` episodes (None: by episodes)
-    :param observation: the env's observation, ``"paper"`` (the paper's state) or ``"goal"`` (the goal-conditioned
-        extension, :class:`noma_radiomap.wrappers.RelativeGoalObservation`)
+    :param observation: the env's observation layout (docs/MODEL.md, "Observations"): ``"goal"`` (the default of every
+        entry point: positions, destinations, gains, arrived flags, direction and distance to the destination),
+        ``"destinations"`` (the same without the goal features) or ``"paper"`` (Eq. (24): positions and gains only).
+        The run id names it unless it is ``"paper"`` (so the ids of runs stored before the layouts were renamed stay)
     :param overrides: single hyperparameters over the set, ``(name, Python literal)`` pairs (``sb3-dtdpg train
         --hyperparams``; :mod:`sb3_dtdpg.overrides`); a run with overrides gets ``_hp<digest>`` in its id
     """
@@ -70,7 +72,7 @@ class RunSpec:
     eval_before_transfer: bool = True
     hyperparams: str = "paper"
     timesteps: int | None = None
-    observation: str = "paper"
+    observation: str = "goal"
     overrides: tuple[tuple[str, str], ...] = ()
 
     @property
@@ -104,8 +106,7 @@ class RunSpec:
         kwargs: dict[str, Any] = {} if self.scenario is None else {"scenario": self.scenario}
         if self.inducing is not None:
             kwargs["inducing"] = self.inducing
-        if self.observation != "paper":
-            kwargs["observation"] = self.observation
+        kwargs["observation"] = self.observation
         return kwargs
 
 
@@ -117,24 +118,43 @@ class RunMismatchError(ValueError):
     """A stored result or checkpoint belongs to another run than the one asked for (same run id, other identity)."""
 
 
-def _hyperparameters(spec: RunSpec) -> dict[str, Any]:
-    """What :func:`sb3_dtdpg.baselines.make_model` builds the algorithm with: the class defaults and the set's values."""
-    from sb3_dtdpg import baselines
+def build_model(spec: RunSpec, env: Any, **kwargs: Any) -> Any:
+    """
+    :param spec: the run
+    :param env: its training env (:func:`sb3_dtdpg.baselines.make_env` of the spec)
+    :param kwargs: further constructor arguments (verbosity, DT-DPG's ``curriculum_save_path``)
+    :return: the untrained model of the run, as :func:`sb3_dtdpg.baselines.make_model` builds it
+    """
+    from sb3_dtdpg.baselines import make_model
 
-    cls = baselines.algorithm_class(spec.algo)
-    values: dict[str, Any] = {
-        name: repr(parameter.default)
-        for name, parameter in inspect.signature(cls).parameters.items()
-        if parameter.default is not inspect.Parameter.empty
-    }
-    if spec.algo == "ddpg":
-        values.update(baselines.DDPG_KWARGS, ou_sigma=baselines.DDPG_OU_SIGMA)
-    elif spec.algo == "td3":
-        values["noise_sigma"] = baselines.TD3_NOISE_SIGMA
-    if spec.hyperparams == "tuned":
-        values.update(baselines.TUNED_KWARGS)
-    values.update(spec.override_kwargs)
-    return values
+    destination_episodes = None
+    if spec.algo == "dtdpg":
+        destination_episodes = spec.destination_episodes or max(1, round(0.6 * spec.episodes))
+    return make_model(
+        spec.algo,
+        env,
+        seed=spec.seed,
+        learning_rate=spec.learning_rate,
+        destination_episodes=destination_episodes,
+        hyperparams=spec.hyperparams,
+        **kwargs,
+        **spec.override_kwargs,
+    )
+
+
+def _hyperparameters(spec: RunSpec) -> dict[str, Any]:
+    """
+    The settings the run trains with, read back from the model built for it (:func:`build_model`,
+    :func:`sb3_dtdpg.presets.model_settings`), never re-derived from the presets.
+    """
+    from sb3_dtdpg.baselines import make_env
+    from sb3_dtdpg.presets import model_settings
+
+    env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
+    try:
+        return model_settings(build_model(spec, env))
+    finally:
+        env.close()
 
 
 def run_identity(spec: RunSpec) -> dict[str, Any]:
