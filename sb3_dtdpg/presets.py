@@ -7,7 +7,7 @@
 DT-DPG and its DDPG baseline share a set, so that a comparison differs only in the method; the baselines add
 their exploration noise (:data:`BASELINE_NOISE`: DDPG's constant OU noise, TD3's Gaussian noise). TD3, SAC and
 TQC have one set, ``"paper"``: their SB3 defaults and that noise. :func:`sb3_dtdpg.baselines.make_model`,
-the command line's ``--hyperparams`` and the RL Zoo files ``zoo_configs/*.yml`` (written from here by
+the command line's ``--preset`` and the RL Zoo files ``zoo_configs/*.yml`` (written from here by
 :mod:`sb3_dtdpg.zoo_files`) all read these definitions; :class:`sb3_dtdpg.DTDPG`'s own defaults are SB3's
 generic ones. In Python::
 

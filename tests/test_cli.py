@@ -130,7 +130,7 @@ def test_reproduce_skips_finished_runs(tmp_path):
 def test_reproduce_with_tuned_hyperparameters_compares_the_paper_learning_rate():
     experiments = reproduce_specs(MICRO, seeds=1, hyperparams="tuned")
     specs = [s for specs in experiments.values() for s in specs]
-    assert {s.hyperparams for s in specs} == {"tuned"} and all(s.run_id.endswith("_tuned") for s in specs)
+    assert {s.hyperparams for s in specs} == {"tuned"} and all(s.run_id.endswith("_tuned_goal") for s in specs)
     assert {s.learning_rate for s in experiments["learning_rates"]} == {None, 1e-4}  # the set's own 1e-3, and 1e-4
     assert {s.learning_rate for s in reproduce_specs(MICRO, seeds=1)["learning_rates"]} == {None, 1e-3}
     paper_ids = {s.run_id for specs in reproduce_specs(MICRO, seeds=1).values() for s in specs}
@@ -181,9 +181,9 @@ def test_bad_arguments_are_rejected(argv, message, capsys):
 
 
 def test_the_observation_is_part_of_a_run():
-    paper, goal = RunSpec("dtdpg", "noma", 0, 3), RunSpec("dtdpg", "noma", 0, 3, observation="goal")
+    paper, goal = RunSpec("dtdpg", "noma", 0, 3, observation="paper"), RunSpec("dtdpg", "noma", 0, 3)
     assert goal.run_id == "dtdpg_noma_s0_goal" and paper.run_id == "dtdpg_noma_s0"  # one folder can hold both
-    assert goal.env_kwargs == {"observation": "goal"} and "observation" not in paper.env_kwargs
+    assert goal.env_kwargs == {"observation": "goal"} and paper.env_kwargs == {"observation": "paper"}
     assert run_identity(goal)["spec"]["observation"] == "goal" != run_identity(paper)["spec"]["observation"]
     with pytest.raises(ValueError, match="observation must be one of"):
         run_compare("unused", budget="_micro", observation="relative")

@@ -112,8 +112,8 @@ def _table_one_model_settings(settings: dict) -> None:
 def test_table_one_is_one_definition_that_the_cli_python_and_zoo_read(tmp_path):
     from sb3_dtdpg.zoo import ExperimentManager, register_dtdpg
 
-    args = build_parser().parse_args(["train", "--algo", "dtdpg", "--hyperparams", "paper", "--out", str(tmp_path)])
-    cli = make_model(args.algo, make_env(args.algo), hyperparams=args.hyperparams)
+    args = build_parser().parse_args(["train", "--algo", "dtdpg", "--preset", "paper", "--out", str(tmp_path)])
+    cli = make_model(args.algo, make_env(args.algo), hyperparams=args.preset)
     python = DTDPG("MlpPolicy", gym.make("NomaRadioMap-v0"), **presets.preset("paper"))
     register_dtdpg()
     manager = ExperimentManager(

@@ -2,7 +2,6 @@
 
 import dataclasses
 import json
-import math
 import os
 import signal
 import subprocess
@@ -26,7 +25,7 @@ from sb3_dtdpg.experiments.runs import (
 
 pytestmark = pytest.mark.filterwarnings("ignore:The inplace keyword:DeprecationWarning", "ignore::FutureWarning")
 
-SPEC = RunSpec("ddpg", "noma", 0, 3, scenario="small", eval_episodes=1, eval_before_transfer=False)
+SPEC = RunSpec("ddpg", "noma", 0, 3, scenario="small", eval_episodes=1, eval_before_transfer=False, observation="paper")
 TRAIN = ["train", "--algo", "ddpg", "--hyperparams", "paper", "--observation", "paper", "--scenario", "small"]
 TRAIN += ["--episodes", "3", "--eval-episodes", "1", "--no-progress"]
 
@@ -89,13 +88,13 @@ def test_compare_and_train_exclude_each_other_on_one_folder(tmp_path):
 
 # ---------------------------------------------------------------------------------------------- diverged runs
 def test_a_diverged_run_records_its_failure_and_leaves_no_checkpoint_behind(tmp_path):
-    diverging = dataclasses.replace(SPEC, episodes=6, learning_rate=math.inf)
+    diverging = dataclasses.replace(SPEC, episodes=6, learning_rate=1e30)  # finite: inf is refused at construction
     with pytest.raises(RunDivergedError, match=r"ddpg_noma_s0: training diverged at step \d+: the policy's .* non-finite"):
         run_one(diverging, tmp_path, checkpoint_every=1, resume=True)
     run_dir = tmp_path / "runs" / SPEC.run_id
     assert sorted(p.name for p in run_dir.iterdir()) == ["failed.json"]
     failure = json.loads((run_dir / "failed.json").read_text())
-    assert failure["identity"]["spec"]["learning_rate"] == math.inf and "non-finite" in failure["error"]
+    assert failure["identity"]["spec"]["learning_rate"] == 1e30 and "non-finite" in failure["error"]
     # The folder is not held against other settings: the next run trains (before: RunMismatchError)
     result = run_one(dataclasses.replace(SPEC, episodes=6), tmp_path, checkpoint_every=1, resume=True)
     assert result["train"]["episodes"] == 6 and not (run_dir / "failed.json").exists()
@@ -131,7 +130,7 @@ def test_sigkill_of_compare_while_training_then_a_rerun_gives_the_uninterrupted_
     assert any(killed.glob("tb/*/events.out.tfevents*"))  # and it had started logging
     run_compare(killed, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
     run_compare(reference, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
-    assert _results(killed) == _results(reference) and sorted(_results(killed)) == ["ddpg_noma_s0", "ddpg_oma_s0"]
+    assert _results(killed) == _results(reference) and sorted(_results(killed)) == ["ddpg_noma_s0_goal", "ddpg_oma_s0_goal"]
     for run_id in _results(killed):
         assert len(_events(killed / "tb" / run_id)) == 1  # one event stream per run: the killed one's is gone
     assert not list(killed.rglob("*.tmp")) and not list(killed.rglob("progress.json"))
