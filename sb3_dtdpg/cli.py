@@ -71,14 +71,18 @@ def _user_errors(args: argparse.Namespace) -> Iterator[None]:
 
 
 def _busy_folder_errors(args: argparse.Namespace) -> contextlib.AbstractContextManager[None]:
-    """A folder in use by another job (``OutputBusyError``) as a usage error of the subcommand."""
-    from sb3_dtdpg.experiments.runs import OutputBusyError
+    """
+    A folder in use by another job (``OutputBusyError``), one holding another run under the same id
+    (``RunMismatchError``) or a run whose training diverged (``RunDivergedError``, e.g. a learning rate far too
+    large) as one ``error:`` line of the subcommand (exit status 2).
+    """
+    from sb3_dtdpg.experiments.runs import OutputBusyError, RunDivergedError, RunMismatchError
 
     @contextlib.contextmanager
     def guard() -> Iterator[None]:
         try:
             yield
-        except OutputBusyError as error:
+        except (OutputBusyError, RunMismatchError, RunDivergedError) as error:
             args.error(str(error))
 
     return guard()

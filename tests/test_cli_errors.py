@@ -74,6 +74,17 @@ def test_a_folder_in_use_is_a_user_error(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir() if p.name != ".lock") == before
 
 
+def test_a_folder_holding_another_run_of_the_same_id_is_a_user_error(tmp_path, capsys):
+    train = ["train", "--algo", "ddpg", "--preset", "paper", "--scenario", "small", "--eval-episodes", "1"]
+    train += ["--observation", "paper", "--out", str(tmp_path), "--no-progress"]
+    assert main([*train, "--episodes", "2"]) == 0
+    result = tmp_path / "runs" / "ddpg_noma_s0" / "result.json"
+    stored = result.read_bytes()
+    code, printed = run_cli([*train, "--episodes", "3"], capsys)  # same run id, other budget
+    assert_one_error_line(code, printed, "train", "belongs to another run with the same id")
+    assert result.read_bytes() == stored
+
+
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this platform")
 def test_a_scenario_that_is_a_folder_or_a_fifo_says_so(tmp_path, capsys):
     code, printed = run_cli(["map", "--scenario", str(tmp_path)], capsys)
