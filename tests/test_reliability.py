@@ -262,8 +262,9 @@ def test_train_writes_checkpoints_and_resumes(tmp_path, monkeypatch, capsys, alg
     assert not stale.exists() and not (run_dir / "checkpoint.json").exists() and not (run_dir / "checkpoints").exists()
     # Finished: the same command returns the result; other settings in the same folder are refused.
     assert main(argv) == 0
-    with pytest.raises(RunMismatchError, match=r"spec\.episodes: 4 stored, 5 now"):
+    with pytest.raises(SystemExit) as exit_info:  # another run under the same id: one error line, no traceback
         main([*argv, "--episodes", "5"])
+    assert exit_info.value.code == 2 and "spec.episodes: 4 stored, 5 now" in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------------------------------------- files

@@ -213,3 +213,21 @@ def test_train_works_without_home(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "o" / "runs" / SPEC.run_id / "result.json").exists() and len(_events(tmp_path / "o" / "tb")) == 1
+
+
+# ---------------------------------------------------------------------------------------------- lock files
+def test_no_lock_file_stays_behind_and_a_shared_lock_outlives_its_first_holder(tmp_path):
+    with output_lock(tmp_path):
+        assert (tmp_path / ".lock").exists()
+    assert not list(tmp_path.glob("*.lock")) and not list(tmp_path.glob(".*lock"))
+    # two trains of other run ids share the folder's lock: the first to end must not free the folder
+    with output_lock(tmp_path, ".a.lock"):
+        with output_lock(tmp_path, ".b.lock"):
+            pass
+        assert (tmp_path / ".lock").exists() and not (tmp_path / ".b.lock").exists()
+        with pytest.raises(OutputBusyError):
+            with output_lock(tmp_path):
+                pass
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    with output_lock(tmp_path):  # and the folder is free again
+        pass

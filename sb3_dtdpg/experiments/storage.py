@@ -124,16 +124,45 @@ def _hold(path: Path, shared: bool) -> Iterator[bool]:
         finally:
             lock.release()
         return
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    fd = _locked_descriptor(path, fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
+    if fd is None:
+        yield False
+        return
     try:
-        try:
-            fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
-        except BlockingIOError:
-            yield False
-            return
         yield True
     finally:
-        os.close(fd)  # closing the descriptor releases the lock
+        try:  # the last holder removes the file, so that no lock file stays behind in the folder
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            path.unlink(missing_ok=True)
+        except BlockingIOError:
+            pass  # another job shares the lock: it removes the file when it ends
+        finally:
+            os.close(fd)  # closing the descriptor releases the lock
+
+
+def _locked_descriptor(path: Path, mode: int) -> int | None:
+    """
+    :param path: the lock file (created when missing)
+    :param mode: ``fcntl.LOCK_SH`` or ``fcntl.LOCK_EX``
+    :return: a descriptor of ``path`` holding the lock, or None when another process holds it. A file that its
+        last holder removed between our open and our lock is opened again, so two jobs never hold the locks of two
+        different files of one name.
+    """
+    import fcntl
+
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, mode | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            return None
+        try:
+            if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                return fd
+        except FileNotFoundError:
+            pass
+        os.close(fd)
 
 
 @contextlib.contextmanager
