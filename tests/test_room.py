@@ -14,8 +14,8 @@ from sb3_dtdpg.evaluation import evaluate
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, PLANNERS, SHORTEST_PATH_PLANNER
 from sb3_dtdpg.experiments.runs import RunSpec, get_budget
 
-MIN_PATH_MARGIN = 15.0  # SPEC 2.1: best planner - shortest-path planner (best power), NOMA
-MIN_NOMA_MARGIN = 25.0  # SPEC 2.1: best planner NOMA - best planner OMA
+MIN_PATH_MARGIN = 15.0  # docs/SCENARIOS.md, "mall calibration": best planner - shortest-path planner (best power), NOMA
+MIN_NOMA_MARGIN = 25.0  # docs/SCENARIOS.md, "mall calibration": best planner NOMA - best planner OMA
 
 
 @pytest.fixture(scope="module")
