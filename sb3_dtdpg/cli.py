@@ -374,6 +374,7 @@ def _run_reproduce(args: argparse.Namespace) -> None:
         hyperparams=args.hyperparams,
         observation=args.observation,
         experiments=args.experiments,
+        multiple_access=args.multiple_access,
     )
 
 
@@ -753,9 +754,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--experiments",
         nargs="+",
-        choices=("table_ii", "ddpg_vs_dtdpg", "learning_rates"),
+        choices=("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task"),
         default=None,
         help="train only the runs of these experiments (default: all); the tables use every finished run",
+    )
+    p.add_argument(
+        "--multiple-access",
+        nargs="+",
+        choices=_MODES,
+        default=None,
+        help="train only the runs of these downlink modes (default: noma oma); the tables use every finished run",
     )
     _add_common_run_options(p)
     p.set_defaults(func=_cmd_reproduce)

@@ -22,6 +22,8 @@ class Budget:
     :param eval_episodes: test episodes per run (the paper: 20, with Rayleigh fading)
     :param seeds: default number of seeds per configuration
     :param scenario: scenario name (None: the env's default, ``mall``)
+    :param paper_task_episodes: training episodes of the paper-task runs, whose episodes last up to 1000 steps
+        (None: ``episodes``)
     """
 
     name: str
@@ -30,9 +32,16 @@ class Budget:
     eval_episodes: int
     seeds: int
     scenario: str | None = None
+    paper_task_episodes: int | None = None
+
+    @property
+    def task_episodes(self) -> int:
+        """Training episodes of the paper-task runs."""
+        return self.episodes if self.paper_task_episodes is None else self.paper_task_episodes
 
 
-#: ``tiny`` runs the whole pipeline on the ``small`` scenario in minutes (too short to learn: a check that it runs);
+#: ``tiny`` runs the whole pipeline on the ``small`` scenario in minutes (too short to learn: a check that it runs; its
+#: paper-task runs train 3 episodes, since those last up to 1000 steps);
 #: ``smoke`` is the shortest budget that shows learning: 150 episodes on ``small``, where DT-DPG brings both robots
 #: home on the test missions (measured, docs/BENCHMARKS.md); ``default`` fits ``compare`` in <= 15 minutes on a
 #: 2-core machine (docs/RESULTS.md); ``mall-200`` and ``small-200`` are the paper's experiments with 200/280
@@ -40,7 +49,7 @@ class Budget:
 #: hour, docs/RESULTS.md); ``paper`` is the paper's scale. ``_micro`` is for the tests.
 BUDGETS: dict[str, Budget] = {
     "_micro": Budget("_micro", episodes=3, long_episodes=4, eval_episodes=2, seeds=2, scenario="small"),
-    "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small"),
+    "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small", paper_task_episodes=3),
     "smoke": Budget("smoke", episodes=150, long_episodes=200, eval_episodes=20, seeds=1, scenario="small"),
     "default": Budget("default", episodes=250, long_episodes=350, eval_episodes=20, seeds=1),
     "mall-200": Budget("mall-200", episodes=200, long_episodes=280, eval_episodes=20, seeds=3),
@@ -78,6 +87,7 @@ def check_budget(spec: RunSpec) -> None:
     import gymnasium as gym
 
     from noma_radiomap import load_scenario
+    from noma_radiomap.core import PAPER_MAX_STEPS
     from sb3_dtdpg.baselines import check_training_budget, hyperparameter
 
     learning_starts = int(
@@ -86,8 +96,11 @@ def check_budget(spec: RunSpec) -> None:
     if spec.timesteps is not None:
         check_training_budget(spec.timesteps, learning_starts, f"{spec.timesteps} env steps ({spec.run_id})")
         return
-    scenario = spec.scenario or gym.spec(spec.env_id).kwargs.get("scenario", "mall")
+    registered = gym.spec(spec.env_id).kwargs
+    scenario = spec.scenario or registered.get("scenario", "mall")
     max_steps = int(load_scenario(scenario).mission.max_steps)
+    if registered.get("task") == "paper":
+        max_steps = PAPER_MAX_STEPS
     check_training_budget(
         spec.episodes * max_steps,
         learning_starts,

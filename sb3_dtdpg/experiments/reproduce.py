@@ -5,10 +5,13 @@ Runs (per seed; ``E`` and ``L`` are the budget's ``episodes`` and ``long_episode
 - Table II: DT-DPG in NOMA and OMA, trained on the radio map for ``E`` episodes and in "reality"
   (Rayleigh fading) for ``E`` and ``L`` episodes, tested on 20 Rayleigh episodes;
 - DDPG vs DT-DPG: plain DDPG in NOMA and OMA, radio map, ``E`` episodes (success rate and MQI);
-- the two learning rates (paper Fig. 6): DT-DPG at 1e-3 and 1e-4 (one is the hyperparameter set's own), NOMA and OMA.
+- the two learning rates (paper Fig. 6): DT-DPG at 1e-3 and 1e-4 (one is the hyperparameter set's own), NOMA and OMA;
+- the paper's task (:mod:`sb3_dtdpg.experiments.paper_task`): DDPG vs DT-DPG on ``NomaRadioMapPaper-v0`` with
+  Table I and with the tuned set, NOMA and OMA, ``E`` episodes (the share of training episodes that reach the
+  destination, the paper's central claim).
 
-Every run uses one hyperparameter set (``hyperparams``): ``"paper"`` (Table I) or ``"tuned"`` (the best measured
-DT-DPG settings, given to DDPG as well; see :mod:`sb3_dtdpg.baselines`).
+The first three use one hyperparameter set (``hyperparams``) and observation: ``"paper"`` (Table I) or ``"tuned"``
+(the best measured DT-DPG settings, given to DDPG as well; see :mod:`sb3_dtdpg.presets`).
 
 Figures: the power and SINR maps, trajectories NOMA vs OMA and before/after the transfer, reward per
 episode in both phases for the two learning rates, MQI per episode (the dip at the transfer) and
@@ -28,6 +31,7 @@ from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import plots, tables
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
+from sb3_dtdpg.experiments.paper_task import paper_task_specs, paper_task_tables
 from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
 __all__ = ["EXPERIMENTS", "LEARNING_RATES", "PAPER_TABLE_II", "other_learning_rate", "reproduce_specs", "run_reproduce"]
@@ -42,7 +46,7 @@ PAPER_TABLE_II: dict[tuple[str, str, str], float] = {
     ("NOMA", "reality", "L"): 929.0,
 }
 #: The experiments of :func:`reproduce_specs`, by name.
-EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates")
+EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task")
 #: The paper's two learning rates (Fig. 6).
 LEARNING_RATES = (1e-4, 1e-3)
 
@@ -99,7 +103,12 @@ def reproduce_specs(
     lrs = [
         _spec(budget, "dtdpg", m, s, "radio_map", e, other, hyperparams=h, observation=o) for m in modes for s in range(seeds)
     ]
-    return {"ddpg_vs_dtdpg": dtdpg + ddpg, "table_ii": table, "learning_rates": dtdpg + lrs}
+    return {
+        "ddpg_vs_dtdpg": dtdpg + ddpg,
+        "table_ii": table,
+        "learning_rates": dtdpg + lrs,
+        "paper_task": paper_task_specs(budget, seeds, modes),
+    }
 
 
 def _approach(spec: dict[str, Any], budget: Budget) -> tuple[str, str]:
@@ -196,7 +205,9 @@ def finished_line(out: Path) -> Callable[[str], None]:
     return report
 
 
-def _check_arguments(seeds: int, observation: str, experiments: Sequence[str] | None) -> None:
+def _check_arguments(
+    seeds: int, observation: str, experiments: Sequence[str] | None, multiple_access: Sequence[str] | None = None
+) -> None:
     from noma_radiomap.registration import check_observation
 
     if seeds < 1:
@@ -205,6 +216,9 @@ def _check_arguments(seeds: int, observation: str, experiments: Sequence[str] | 
     unknown = sorted(set(experiments or ()) - set(EXPERIMENTS))
     if unknown:
         raise ValueError(f"experiments: unknown {unknown}, expected some of {list(EXPERIMENTS)}")
+    modes = sorted(set(multiple_access or ()) - {"noma", "oma"})
+    if modes:
+        raise ValueError(f"multiple_access: unknown {modes}, expected some of ['noma', 'oma']")
 
 
 def run_reproduce(
@@ -217,6 +231,7 @@ def run_reproduce(
     hyperparams: str = "paper",
     observation: str = "goal",
     experiments: Sequence[str] | None = None,
+    multiple_access: Sequence[str] | None = None,
 ) -> dict[str, pd.DataFrame]:
     """
     Run (or resume) every experiment and write its tables (Markdown + CSV) and figures under ``out``.
@@ -232,6 +247,7 @@ def run_reproduce(
     :param observation: ``"goal"`` (the goal-conditioned layout, the default), ``"destinations"`` or ``"paper"`` (Eq. (24))
     :param experiments: train only the runs of these experiments (names of :data:`EXPERIMENTS`; None: all); the
         tables and figures are drawn from every finished run either way
+    :param multiple_access: train only the runs of these downlink modes (``"noma"``, ``"oma"``; None: both)
     :return: the tables, by name
     :raises ValueError: on a bad argument, or a budget that cannot train a run (before any run starts)
     :raises OutputBusyError: another job is using ``out``
@@ -241,7 +257,7 @@ def run_reproduce(
 
     budget = get_budget(budget)
     seeds = budget.seeds if seeds is None else seeds
-    _check_arguments(seeds, observation, experiments)
+    _check_arguments(seeds, observation, experiments, multiple_access)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
@@ -252,7 +268,8 @@ def run_reproduce(
         # Seed by seed, so that an interrupted job has whole seeds of every experiment.
         unique.sort(key=lambda spec: spec.seed)
         if train:
-            wanted = {s.run_id for name in (chosen or EXPERIMENTS) for s in experiments[name]}
+            modes = set(multiple_access or ("noma", "oma"))
+            wanted = {s.run_id for name in (chosen or EXPERIMENTS) for s in experiments[name] if s.multiple_access in modes}
             report = run_many(
                 [s for s in unique if s.run_id in wanted],
                 out,
@@ -322,8 +339,15 @@ def run_reproduce(
             out_tables["learning_rates"] = summary
             if progress:
                 tables.print_table(summary, "Learning rates (DT-DPG)", columns=("multiple_access", "learning_rate"))
+        if (summary := paper_task_tables(out, budget, experiments["paper_task"], results, progress)) is not None:
+            out_tables["paper_task"] = summary
+        task_runs = {spec.run_id for spec in experiments["paper_task"]}  # paired in their own table
         paired = _paired_table(
-            out, budget, [r for r in results.values() if r is not None], base_lr, other_learning_rate(hyperparams)
+            out,
+            budget,
+            [r for run_id, r in results.items() if r is not None and run_id not in task_runs],
+            base_lr,
+            other_learning_rate(hyperparams),
         )
         if paired is not None:
             out_tables["paired"] = paired

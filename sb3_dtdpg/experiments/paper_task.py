@@ -1,0 +1,202 @@
+"""The paper's central claim on the paper's own task: DDPG vs DT-DPG, Table I and the tuned preset (docs/RESULTS.md).
+
+The paper (Sec. V) reports that under the same training constraints DDPG finds the destination in fewer than
+20 % of its training episodes and DT-DPG in more than 95 %. This experiment trains both on the paper's task
+(``NomaRadioMapPaper-v0``: one fixed destination per robot, the state of Eq. (24), 1000-step episodes;
+docs/MODEL.md), radio-map training, with each preset of :data:`PRESETS`, and reports the share of training
+episodes in which every robot reached its destination (over all episodes and over the last 100, as a curve)
+beside the usual test metrics on the 20 Rayleigh test missions, with DT-DPG - DDPG paired by seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sb3_dtdpg.evaluation import mean_ci
+from sb3_dtdpg.experiments import plots, tables
+from sb3_dtdpg.experiments.budgets import Budget
+from sb3_dtdpg.experiments.specs import RunSpec
+
+__all__ = ["ENV_ID", "LAST_EPISODES", "PRESETS", "paper_task_specs", "paper_task_tables", "training_success"]
+
+#: The paper's task (the OMA runs pass ``multiple_access="oma"``).
+ENV_ID = "NomaRadioMapPaper-v0"
+#: The presets compared: Table I as printed, and the tuned set of the default mission (docs/MODEL.md).
+PRESETS = ("paper", "tuned")
+#: The training success rate is also reported over the last this many training episodes.
+LAST_EPISODES = 100
+#: The paper's claim: DDPG below, DT-DPG above these training success rates.
+PAPER_CLAIM = {"DDPG": ("<", 0.20), "DT-DPG": (">", 0.95)}
+_METRICS = ("train_success", "train_success_last", "success_rate", "mqi")
+
+
+def paper_task_specs(budget: Budget, seeds: int, modes: Sequence[str] = ("noma", "oma")) -> list[RunSpec]:
+    """
+    :param budget: the experiment's scale (:attr:`~sb3_dtdpg.experiments.budgets.Budget.task_episodes` training
+        episodes per run)
+    :param seeds: seeds per configuration
+    :param modes: the downlink modes
+    :return: DT-DPG and DDPG runs on the paper's task, per preset, mode and seed (seed-major order is left to
+        the caller)
+    """
+    return [
+        RunSpec(
+            algo,
+            mode,
+            seed,
+            budget.task_episodes,
+            env_id=ENV_ID,
+            scenario=budget.scenario,
+            eval_episodes=budget.eval_episodes,
+            tag=f"paper_task_{budget.task_episodes}",
+            hyperparams=preset,
+            observation="paper",
+        )
+        for preset in PRESETS
+        for algo in ("dtdpg", "ddpg")
+        for mode in modes
+        for seed in range(seeds)
+    ]
+
+
+def training_success(log_dir: str | Path, last: int = LAST_EPISODES) -> tuple[float, float, int]:
+    """
+    :param log_dir: a run's TensorBoard folder
+    :param last: the number of final episodes of the second rate
+    :return: the share of training episodes in which every robot reached its destination, over all episodes and
+        over the last ``last``, and the number of episodes (NaN rates when nothing was logged)
+    """
+    successes = plots.rolling_curve(log_dir, plots.SUCCESS_TAG, 1).to_numpy(dtype=float)
+    if not len(successes):
+        return float("nan"), float("nan"), 0
+    return float(successes.mean()), float(successes[-last:].mean()), len(successes)
+
+
+def _records(out: Path, specs: Sequence[RunSpec], results: dict[str, Any]) -> pd.DataFrame:
+    finished = [s for s in specs if results.get(s.run_id) is not None]
+    records = tables.run_records([results[s.run_id] for s in finished])
+    if records.empty:
+        return records
+    rates = [training_success(out / "tb" / s.run_id) for s in finished]
+    records.insert(1, "preset", [s.hyperparams for s in finished])
+    records["train_success"] = [r[0] for r in rates]
+    records["train_success_last"] = [r[1] for r in rates]
+    records["train_episodes"] = [r[2] for r in rates]
+    return records
+
+
+def _summary(records: pd.DataFrame) -> pd.DataFrame:
+    rows = []
+    for (preset, algorithm, mode), group in records.groupby(["preset", "algorithm", "multiple_access"], sort=False):
+        row: dict[str, Any] = {"preset": preset, "algorithm": algorithm, "multiple_access": mode, "n": len(group)}
+        for metric in _METRICS:
+            row[metric], row[f"{metric}_ci"] = mean_ci(group[metric].to_numpy(dtype=float))
+        claim = PAPER_CLAIM.get(algorithm)
+        if claim is not None:
+            side, bar = claim
+            value = row["train_success"]
+            row["paper_claim"] = f"{side} {100 * bar:.0f} %: " + (
+                "holds" if (value < bar if side == "<" else value > bar) else "does not hold"
+            )
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _cell(value: float, ci: float, scale: float = 1.0, digits: int = 1) -> str:
+    if not np.isfinite(value):
+        return "n/a"
+    return f"{scale * value:.{digits}f} ± {scale * ci:.{digits}f}" if np.isfinite(ci) else f"{scale * value:.{digits}f}"
+
+
+def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
+    header = [
+        "Preset",
+        "Algorithm",
+        "MA",
+        "n",
+        "Training success, all (%)",
+        f"last {LAST_EPISODES} (%)",
+        "Test success (%)",
+        "Test MQI",
+        "Paper's claim",
+    ]
+    lines = [f"# {title}", "", "| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    for _, row in summary.iterrows():
+        cells = [
+            str(row["preset"]),
+            str(row["algorithm"]),
+            str(row["multiple_access"]),
+            f"{row['n']} seeds",
+            _cell(row["train_success"], row["train_success_ci"], 100.0),
+            _cell(row["train_success_last"], row["train_success_last_ci"], 100.0),
+            _cell(row["success_rate"], row["success_rate_ci"], 100.0, 0),
+            _cell(row["mqi"], row["mqi_ci"]),
+            str(row.get("paper_claim", "")),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "mean ± 95 % CI half-width (t-interval over seeds); training success: the share of training episodes in which "
+        "every robot reached its destination.",
+        "",
+    ]
+    if not paired.empty:
+        header = ["Contrast", "Preset", "MA", "Pairs (seeds)", "Training success, all (points)", f"last {LAST_EPISODES}"]
+        header += ["Test success (points)", "Test MQI"]
+        lines += ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+        for _, row in paired.iterrows():
+            cells = [str(row["contrast"]), str(row["preset"]), str(row["multiple_access"]), str(row["n"])]
+            cells += [_cell(row[m], row[f"{m}_ci"], 100.0) for m in ("train_success", "train_success_last")]
+            cells += [_cell(row["success_rate"], row["success_rate_ci"], 100.0, 0), _cell(row["mqi"], row["mqi_ci"])]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines += ["", "paired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences).", ""]
+    return "\n".join(lines)
+
+
+def paper_task_tables(
+    out: Path, budget: Budget, specs: Sequence[RunSpec], results: dict[str, Any], progress: bool = True
+) -> pd.DataFrame | None:
+    """
+    Write ``paper_task.md`` / ``paper_task.csv`` (per preset, algorithm and mode), ``paper_task_runs.csv`` (per run),
+    ``paper_task_paired.csv`` (DT-DPG - DDPG by seed) and ``fig_paper_task_success.png`` (the training success
+    rate per episode, a rolling mean over 20 episodes) from the finished runs of :func:`paper_task_specs`.
+
+    :return: the summary, or None when no run has finished
+    """
+    records = _records(out, specs, results)
+    if records.empty:
+        return None
+    summary = _summary(records)
+    paired = tables.paired_differences(
+        records, "algorithm", "DT-DPG", "DDPG", by=("preset", "multiple_access"), metrics=_METRICS
+    )
+    title = (
+        f"The paper's task: DDPG vs DT-DPG ({budget.name} budget: {budget.task_episodes} training episodes, "
+        f"{budget.scenario or 'mall'}, radio-map training, {budget.eval_episodes} Rayleigh test missions)"
+    )
+    text = _markdown(summary, paired, title)
+    (out / "paper_task.md").write_text(text)
+    summary.to_csv(out / "paper_task.csv", index=False)
+    records.to_csv(out / "paper_task_runs.csv", index=False)
+    paired.to_csv(out / "paper_task_paired.csv", index=False)
+    groups: dict[str, list[Path]] = {}
+    for spec in specs:
+        if results.get(spec.run_id) is not None:
+            label = f"{tables.ALGO_LABELS[spec.algo]} {spec.multiple_access.upper()}, {spec.hyperparams}"
+            groups.setdefault(label, []).append(out / "tb" / spec.run_id)
+    plots.plot_learning_curves(
+        groups,
+        out / "fig_paper_task_success.png",
+        tags=((plots.SUCCESS_TAG, "training episodes reaching the destination"),),
+        smooth=20,
+        title=f"The paper's task: training success per episode\n({budget.scenario or 'mall'}, {budget.name} budget; "
+        "dotted: DT-DPG's transfer)",
+    )
+    if progress:
+        print(text)
+    return summary

@@ -1,0 +1,98 @@
+"""The paper-task experiment of ``reproduce``: its runs, the training success rate it reads and the claim it checks."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import gymnasium as gym
+import pandas as pd
+import pytest
+from stable_baselines3.common.logger import configure
+
+from sb3_dtdpg.experiments import paper_task
+from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
+from sb3_dtdpg.experiments.runs import get_budget, result_path, run_identity
+
+MICRO = get_budget("_micro")
+
+
+def _write_successes(log_dir, successes):
+    logger = configure(str(log_dir), ["tensorboard"])
+    for episode, success in enumerate(successes, start=1):
+        logger.record("mission/success", float(success))
+        logger.record("episode/number", episode)
+        logger.dump(episode)
+    logger.close()
+
+
+def _fake_result(spec, mqi):
+    summary = {"n_episodes": 1.0, "success_rate": 0.0, "mqi": mqi, "outage_steps": 3.0, "mission_time": 9.0}
+    return {
+        "identity": run_identity(spec),
+        "spec": dataclasses.asdict(spec),
+        "run_id": spec.run_id,
+        "group": spec.group,
+        "train": {"timesteps": 10, "episodes": spec.episodes, "wall_s": 1.0, "steps_per_s": 1.0},
+        "eval": {"summary": summary, "episodes": [], "trajectories": []},
+    }
+
+
+def test_the_runs_are_the_paper_task_with_both_presets_and_their_own_ids():
+    experiments = reproduce_specs(MICRO, seeds=2)
+    specs = experiments["paper_task"]
+    assert {(s.algo, s.hyperparams, s.multiple_access, s.seed) for s in specs} == {
+        (a, h, m, seed) for a in ("dtdpg", "ddpg") for h in ("paper", "tuned") for m in ("noma", "oma") for seed in (0, 1)
+    }
+    assert {(s.env_id, s.observation, s.channel, s.episodes) for s in specs} == {
+        ("NomaRadioMapPaper-v0", "paper", "radio_map", MICRO.episodes)
+    }
+    others = {s.run_id for name, group in experiments.items() if name != "paper_task" for s in group}
+    ids = [s.run_id for s in specs]
+    assert len(set(ids)) == len(ids) and others.isdisjoint(ids)  # one output folder holds every experiment
+    env = gym.make(specs[0].env_id, **specs[0].env_kwargs)
+    assert env.observation_space.shape == (3 * 2,)  # Eq. (24): position and gain per robot, nothing else
+    assert env.unwrapped.scenario.mission.max_steps == 1000
+
+
+def test_training_success_is_read_per_episode_from_the_run_log(tmp_path):
+    _write_successes(tmp_path, [0, 0, 1, 0, 1, 1])
+    overall, last, episodes = paper_task.training_success(tmp_path, last=3)
+    assert (overall, last, episodes) == (pytest.approx(0.5), pytest.approx(2 / 3), 6)
+    assert paper_task.training_success(tmp_path / "absent")[2] == 0
+
+
+def test_the_table_checks_the_paper_claim_and_pairs_by_seed(tmp_path):
+    specs = [s for s in paper_task.paper_task_specs(MICRO, seeds=2, modes=("noma",)) if s.hyperparams == "paper"]
+    # DDPG finds the destination in 10 % of its episodes (the paper: < 20 %), DT-DPG in 50 % or 70 % (not > 95 %)
+    rates = {("ddpg", 0): [1] + [0] * 9, ("ddpg", 1): [0] * 9 + [1], ("dtdpg", 0): [1, 0] * 5, ("dtdpg", 1): [1] * 7 + [0] * 3}
+    results = {}
+    for spec in specs:
+        _write_successes(tmp_path / "tb" / spec.run_id, rates[spec.algo, spec.seed])
+        results[spec.run_id] = _fake_result(spec, mqi=100.0 * (1 + spec.seed) + (50.0 if spec.algo == "dtdpg" else 0.0))
+    summary = paper_task.paper_task_tables(tmp_path, MICRO, specs, results, progress=False).set_index("algorithm")
+    assert summary.loc["DDPG", "train_success"] == pytest.approx(0.1)
+    assert summary.loc["DT-DPG", "train_success"] == pytest.approx(0.6)
+    assert summary.loc["DDPG", "paper_claim"].endswith(": holds")
+    assert summary.loc["DT-DPG", "paper_claim"].endswith("does not hold")
+    paired = pd.read_csv(tmp_path / "paper_task_paired.csv").iloc[0]
+    assert paired["n"] == 2 and paired["mqi"] == pytest.approx(50.0) and paired["train_success"] == pytest.approx(0.5)
+    assert paired["train_success_last"] == pytest.approx((0.5 + 0.7) / 2 - 0.1)  # last 100 = all 10 here
+    for name in ("paper_task.md", "paper_task_runs.csv", "fig_paper_task_success.png"):
+        assert (tmp_path / name).stat().st_size > 0
+
+
+def test_reproduce_trains_only_the_chosen_modes(tmp_path):
+    with pytest.raises(ValueError, match=r"multiple_access: unknown \['cdma'\]"):
+        run_reproduce(tmp_path, budget="_micro", seeds=1, experiments=["paper_task"], multiple_access=["cdma"])
+    specs = reproduce_specs(MICRO, seeds=1)["paper_task"]
+    for spec in specs:
+        if spec.multiple_access == "oma":  # finished: nothing of the chosen runs is left to train
+            path = result_path(tmp_path, spec)
+            path.parent.mkdir(parents=True)
+            path.write_text(json.dumps(_fake_result(spec, mqi=1.0)))
+    tables = run_reproduce(
+        tmp_path, budget="_micro", seeds=1, progress=False, experiments=["paper_task"], multiple_access=["oma"]
+    )
+    assert not any(result_path(tmp_path, s).exists() for s in specs if s.multiple_access == "noma")
+    assert set(tables["paper_task"]["multiple_access"]) == {"OMA"} and len(tables["paper_task"]) == 4
