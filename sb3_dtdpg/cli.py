@@ -28,7 +28,6 @@ import argparse
 import contextlib
 import math
 import os
-import re
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -257,6 +256,7 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
     from stable_baselines3.common.evaluation import evaluate_policy
 
     from sb3_dtdpg.baselines import make_model, mission_callbacks
+    from sb3_dtdpg.common.files import safe_name
     from sb3_dtdpg.experiments.runs import EpisodeReturnLogger
 
     model = make_model(
@@ -275,7 +275,7 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
     else:
         total = args.episodes * env.spec.max_episode_steps
         callbacks.append(StopTrainingOnMaxEpisodes(args.episodes))
-    run_name = f"{args.algo}_{re.sub(r'[^A-Za-z0-9_.-]', '_', args.env)}_s{args.seed}"
+    run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}"
     model.learn(
         total_timesteps=total, callback=callbacks, log_interval=1, tb_log_name=run_name, progress_bar=not args.no_progress
     )
@@ -355,7 +355,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         paper = BUDGETS["paper"]
         print(
             f"This was the {args.budget!r} budget ({budget.episodes} training episodes per run). The paper's scale "
-            f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; about an hour on 2 cores): "
+            f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; on 2 cores about 75 minutes "
+            "without the paper-task experiment, which takes about 5 hours more): "
             f"sb3-dtdpg reproduce --budget paper --out <folder>"
         )
     return 0
@@ -568,7 +569,7 @@ class _HelpFormatter(argparse.HelpFormatter):
             budgets = "; ".join(
                 f"{name}: {BUDGETS[name].episodes} episodes on {BUDGETS[name].scenario or 'mall'}, "
                 f"{BUDGETS[name].seeds} seed{'s' if BUDGETS[name].seeds != 1 else ''}"
-                + (" (the paper's scale, about an hour on 2 cores: --budget paper)" if name == "paper" else "")
+                + (" (the paper's scale: --budget paper, hours on 2 cores; docs/RESULTS.md)" if name == "paper" else "")
                 for name in PUBLIC_BUDGETS
             )
             text = text.replace("%(budgets)s", budgets)

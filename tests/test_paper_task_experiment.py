@@ -57,9 +57,9 @@ def test_the_runs_are_the_paper_task_with_both_presets_and_their_own_ids():
 
 def test_training_success_is_read_per_episode_from_the_run_log(tmp_path):
     _write_successes(tmp_path, [0, 0, 1, 0, 1, 1])
-    overall, last, episodes = paper_task.training_success(tmp_path, last=3)
-    assert (overall, last, episodes) == (pytest.approx(0.5), pytest.approx(2 / 3), 6)
-    assert paper_task.training_success(tmp_path / "absent")[2] == 0
+    overall, first, last, episodes = paper_task.training_success(tmp_path, window=3)
+    assert (overall, first, last, episodes) == (pytest.approx(0.5), pytest.approx(1 / 3), pytest.approx(2 / 3), 6)
+    assert paper_task.training_success(tmp_path / "absent")[3] == 0
 
 
 def test_the_table_checks_the_paper_claim_and_pairs_by_seed(tmp_path):
@@ -77,7 +77,7 @@ def test_the_table_checks_the_paper_claim_and_pairs_by_seed(tmp_path):
     assert summary.loc["DT-DPG", "paper_claim"].endswith("does not hold")
     paired = pd.read_csv(tmp_path / "paper_task_paired.csv").iloc[0]
     assert paired["n"] == 2 and paired["mqi"] == pytest.approx(50.0) and paired["train_success"] == pytest.approx(0.5)
-    assert paired["train_success_last"] == pytest.approx((0.5 + 0.7) / 2 - 0.1)  # last 100 = all 10 here
+    assert paired["train_success_last"] == paired["train_success_first"] == pytest.approx((0.5 + 0.7) / 2 - 0.1)  # 10 < 100
     for name in ("paper_task.md", "paper_task_runs.csv", "fig_paper_task_success.png"):
         assert (tmp_path / name).stat().st_size > 0
 

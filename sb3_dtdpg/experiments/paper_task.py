@@ -28,11 +28,11 @@ __all__ = ["ENV_ID", "LAST_EPISODES", "PRESETS", "paper_task_specs", "paper_task
 ENV_ID = "NomaRadioMapPaper-v0"
 #: The presets compared: Table I as printed, and the tuned set of the default mission (docs/MODEL.md).
 PRESETS = ("paper", "tuned")
-#: The training success rate is also reported over the last this many training episodes.
+#: The training success rate is also reported over the first and over the last this many training episodes.
 LAST_EPISODES = 100
 #: The paper's claim: DDPG below, DT-DPG above these training success rates.
 PAPER_CLAIM = {"DDPG": ("<", 0.20), "DT-DPG": (">", 0.95)}
-_METRICS = ("train_success", "train_success_last", "success_rate", "mqi")
+_METRICS = ("train_success", "train_success_first", "train_success_last", "success_rate", "mqi")
 
 
 def paper_task_specs(budget: Budget, seeds: int, modes: Sequence[str] = ("noma", "oma")) -> list[RunSpec]:
@@ -64,17 +64,18 @@ def paper_task_specs(budget: Budget, seeds: int, modes: Sequence[str] = ("noma",
     ]
 
 
-def training_success(log_dir: str | Path, last: int = LAST_EPISODES) -> tuple[float, float, int]:
+def training_success(log_dir: str | Path, window: int = LAST_EPISODES) -> tuple[float, float, float, int]:
     """
     :param log_dir: a run's TensorBoard folder
-    :param last: the number of final episodes of the second rate
-    :return: the share of training episodes in which every robot reached its destination, over all episodes and
-        over the last ``last``, and the number of episodes (NaN rates when nothing was logged)
+    :param window: the number of first and of final episodes of the second and third rate
+    :return: the share of training episodes in which every robot reached its destination, over all episodes, over
+        the first ``window`` and over the last ``window``, and the number of episodes (NaN rates when nothing was
+        logged)
     """
     successes = plots.rolling_curve(log_dir, plots.SUCCESS_TAG, 1).to_numpy(dtype=float)
     if not len(successes):
-        return float("nan"), float("nan"), 0
-    return float(successes.mean()), float(successes[-last:].mean()), len(successes)
+        return float("nan"), float("nan"), float("nan"), 0
+    return float(successes.mean()), float(successes[:window].mean()), float(successes[-window:].mean()), len(successes)
 
 
 def _records(out: Path, specs: Sequence[RunSpec], results: dict[str, Any]) -> pd.DataFrame:
@@ -85,8 +86,9 @@ def _records(out: Path, specs: Sequence[RunSpec], results: dict[str, Any]) -> pd
     rates = [training_success(out / "tb" / s.run_id) for s in finished]
     records.insert(1, "preset", [s.hyperparams for s in finished])
     records["train_success"] = [r[0] for r in rates]
-    records["train_success_last"] = [r[1] for r in rates]
-    records["train_episodes"] = [r[2] for r in rates]
+    records["train_success_first"] = [r[1] for r in rates]
+    records["train_success_last"] = [r[2] for r in rates]
+    records["train_episodes"] = [r[3] for r in rates]
     return records
 
 
@@ -120,6 +122,7 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
         "MA",
         "n",
         "Training success, all (%)",
+        f"first {LAST_EPISODES} (%)",
         f"last {LAST_EPISODES} (%)",
         "Test success (%)",
         "Test MQI",
@@ -132,8 +135,7 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
             str(row["algorithm"]),
             str(row["multiple_access"]),
             f"{row['n']} seeds",
-            _cell(row["train_success"], row["train_success_ci"], 100.0),
-            _cell(row["train_success_last"], row["train_success_last_ci"], 100.0),
+            *(_cell(row[m], row[f"{m}_ci"], 100.0) for m in ("train_success", "train_success_first", "train_success_last")),
             _cell(row["success_rate"], row["success_rate_ci"], 100.0, 0),
             _cell(row["mqi"], row["mqi_ci"]),
             str(row.get("paper_claim", "")),
@@ -146,12 +148,15 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
         "",
     ]
     if not paired.empty:
-        header = ["Contrast", "Preset", "MA", "Pairs (seeds)", "Training success, all (points)", f"last {LAST_EPISODES}"]
+        header = ["Contrast", "Preset", "MA", "Pairs (seeds)", "Training success, all (points)"]
+        header += [f"first {LAST_EPISODES}", f"last {LAST_EPISODES}"]
         header += ["Test success (points)", "Test MQI"]
         lines += ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
         for _, row in paired.iterrows():
             cells = [str(row["contrast"]), str(row["preset"]), str(row["multiple_access"]), str(row["n"])]
-            cells += [_cell(row[m], row[f"{m}_ci"], 100.0) for m in ("train_success", "train_success_last")]
+            cells += [
+                _cell(row[m], row[f"{m}_ci"], 100.0) for m in ("train_success", "train_success_first", "train_success_last")
+            ]
             cells += [_cell(row["success_rate"], row["success_rate_ci"], 100.0, 0), _cell(row["mqi"], row["mqi_ci"])]
             lines.append("| " + " | ".join(cells) + " |")
         lines += ["", "paired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences).", ""]
