@@ -42,8 +42,8 @@ def default_phases(
         against 0.8 and no early transfer in docs/BENCHMARKS.md, "The early-transfer rule".
     :param success_window: Window K of the early-transfer rule.
     :param replay_handling: Replay handling when entering the MQI phase. ``"relabel"`` (the default) trained
-        best in ``benchmarks/learning.py`` (docs/BENCHMARKS.md); it needs an env with ``reward_weights`` and
-        reward components.
+        best in ``benchmarks/learning.py`` (docs/BENCHMARKS.md, "Replay handling at the transfer"); it needs an env
+        with ``reward_weights`` and reward components.
     :return: The two phases.
     """
     return parse_phases(

@@ -66,7 +66,7 @@ TABLE_I: dict[str, Any] = {
     "policy_kwargs": {"net_arch": [128, 64]},
 }
 
-#: The best measured settings on NomaRadioMap-v0 (docs/BENCHMARKS.md, "DT-DPG learning").
+#: The best measured settings on NomaRadioMap-v0 (docs/BENCHMARKS.md, "The tuned settings").
 TUNED: dict[str, Any] = {
     "learning_rate": 1e-3,
     "buffer_size": 200_000,

@@ -75,6 +75,11 @@ def test_the_table_checks_the_paper_claim_and_pairs_by_seed(tmp_path):
     assert summary.loc["DT-DPG", "train_success"] == pytest.approx(0.6)
     assert summary.loc["DDPG", "paper_claim"].endswith(": holds")
     assert summary.loc["DT-DPG", "paper_claim"].endswith("does not hold")
+    # the planners on the same missions, and the learners as a fraction of them
+    assert summary.loc["best planner", "mqi_of_best"] == 1.0 and summary.loc["best planner", "preset"] == "-"
+    assert summary.loc["DT-DPG", "mqi_of_shortest"] == pytest.approx(
+        summary.loc["DT-DPG", "mqi"] / summary.loc["shortest-path planner", "mqi"]
+    )
     paired = pd.read_csv(tmp_path / "paper_task_paired.csv").iloc[0]
     assert paired["n"] == 2 and paired["mqi"] == pytest.approx(50.0) and paired["train_success"] == pytest.approx(0.5)
     assert paired["train_success_last"] == paired["train_success_first"] == pytest.approx((0.5 + 0.7) / 2 - 0.1)  # 10 < 100
@@ -95,4 +100,5 @@ def test_reproduce_trains_only_the_chosen_modes(tmp_path):
         tmp_path, budget="_micro", seeds=1, progress=False, experiments=["paper_task"], multiple_access=["oma"]
     )
     assert not any(result_path(tmp_path, s).exists() for s in specs if s.multiple_access == "noma")
-    assert set(tables["paper_task"]["multiple_access"]) == {"OMA"} and len(tables["paper_task"]) == 4
+    learners = tables["paper_task"][tables["paper_task"]["preset"] != "-"]
+    assert set(tables["paper_task"]["multiple_access"]) == {"OMA"} and len(learners) == 4

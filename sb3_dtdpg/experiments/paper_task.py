@@ -109,8 +109,20 @@ def _summary(records: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _with_planners(summary: pd.DataFrame, budget: Budget) -> pd.DataFrame:
+    """The summary with the reference planners' rows on the same test missions, and every row's MQI as a fraction
+    of the best and of the shortest-path planner's."""
+    from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
+
+    modes = [mode.lower() for mode in dict.fromkeys(summary["multiple_access"])]
+    planners = pd.DataFrame(evaluate_planners(modes, budget, env_id=ENV_ID)[0])
+    planners.insert(0, "preset", "-")
+    summary = pd.concat([summary, planners[[c for c in planners if c in summary or c in ("preset", "n")]]])
+    return tables.add_planner_fractions(summary.reset_index(drop=True), BEST_PLANNER, SHORTEST_PATH_PLANNER)
+
+
 def _cell(value: float, ci: float, scale: float = 1.0, digits: int = 1) -> str:
-    if not np.isfinite(value):
+    if not isinstance(value, float | int) or not np.isfinite(value):
         return "n/a"
     return f"{scale * value:.{digits}f} ± {scale * ci:.{digits}f}" if np.isfinite(ci) else f"{scale * value:.{digits}f}"
 
@@ -126,6 +138,8 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
         f"last {LAST_EPISODES} (%)",
         "Test success (%)",
         "Test MQI",
+        "of best",
+        "of shortest",
         "Paper's claim",
     ]
     lines = [f"# {title}", "", "| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
@@ -134,17 +148,20 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
             str(row["preset"]),
             str(row["algorithm"]),
             str(row["multiple_access"]),
-            f"{row['n']} seeds",
+            f"{row['n']} {'seeds' if row['preset'] != '-' else 'episodes'}",
             *(_cell(row[m], row[f"{m}_ci"], 100.0) for m in ("train_success", "train_success_first", "train_success_last")),
             _cell(row["success_rate"], row["success_rate_ci"], 100.0, 0),
             _cell(row["mqi"], row["mqi_ci"]),
-            str(row.get("paper_claim", "")),
+            *(f"{row[c]:.3f}" if np.isfinite(row[c]) else "n/a" for c in ("mqi_of_best", "mqi_of_shortest")),
+            str(row["paper_claim"]) if isinstance(row["paper_claim"], str) else "",
         ]
         lines.append("| " + " | ".join(cells) + " |")
     lines += [
         "",
         "mean ± 95 % CI half-width (t-interval over seeds); training success: the share of training episodes in which "
-        "every robot reached its destination.",
+        "every robot reached its destination; of best, of shortest: the test MQI over the best planner's and over "
+        "the shortest-path planner's (with its best power split) on the same missions; planners: CI over the test "
+        "missions.",
         "",
     ]
     if not paired.empty:
@@ -171,12 +188,12 @@ def paper_task_tables(
     ``paper_task_paired.csv`` (DT-DPG - DDPG by seed) and ``fig_paper_task_success.png`` (the training success
     rate per episode, a rolling mean over 20 episodes) from the finished runs of :func:`paper_task_specs`.
 
-    :return: the summary, or None when no run has finished
+    :return: the summary (with the reference planners' rows), or None when no run has finished
     """
     records = _records(out, specs, results)
     if records.empty:
         return None
-    summary = _summary(records)
+    summary = _with_planners(_summary(records), budget)
     paired = tables.paired_differences(
         records, "algorithm", "DT-DPG", "DDPG", by=("preset", "multiple_access"), metrics=_METRICS
     )

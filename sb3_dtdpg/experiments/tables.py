@@ -263,7 +263,8 @@ def table_notes(summary: pd.DataFrame) -> list[str]:
     """
     notes = [
         "mean ± 95 % CI (t-interval over seeds; planners: over test episodes); n/a: one sample, no CI",
-        "MQI IQM: interquartile mean with a 95 % stratified-bootstrap CI (rliable's method), same samples",
+        "MQI IQM: interquartile mean with a 95 % percentile CI from the stratified bootstrap of Agarwal et al. (2021), "
+        "computed with scipy.stats, same samples",
     ]
     if "mqi_of_best" in summary:
         notes.append(
