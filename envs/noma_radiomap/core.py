@@ -109,6 +109,18 @@ def load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
     raise ValueError(f"scenario must be a scenario name, a YAML path or a Scenario, got {scenario!r}")
 
 
+def task_scenario(scenario: Scenario, task: str) -> Scenario:
+    """
+    :param scenario: a scenario as loaded
+    :param task: one of :data:`TASKS`
+    :return: the scenario as the task runs it: the paper's task caps episodes at :data:`PAPER_MAX_STEPS` steps and
+        sets ``T_total`` to the same
+    """
+    if task != "paper":
+        return scenario
+    return replace(scenario, mission=replace(scenario.mission, max_steps=PAPER_MAX_STEPS, t_total=float(PAPER_MAX_STEPS)))
+
+
 class MissionCore:
     """
     N missions of one scenario on (N, U) arrays. The arguments are those of :class:`~noma_radiomap.NomaRadioMapEnv`.
@@ -149,8 +161,7 @@ class MissionCore:
         sc = load(scenario)
         # The map does not depend on the missions: the scenario as loaded hits the map cache
         self.radio_map = RadioMap.for_scenario(sc)
-        if task == "paper":
-            sc = replace(sc, mission=replace(sc.mission, max_steps=PAPER_MAX_STEPS, t_total=float(PAPER_MAX_STEPS)))
+        sc = task_scenario(sc, task)
         self.scenario = sc
         self.multiple_access, self.channel, self.inducing, self.task = multiple_access, channel, inducing, task
         self.observation = observation

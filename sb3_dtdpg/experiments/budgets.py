@@ -87,7 +87,7 @@ def check_budget(spec: RunSpec) -> None:
     import gymnasium as gym
 
     from noma_radiomap import load_scenario
-    from noma_radiomap.core import PAPER_MAX_STEPS
+    from noma_radiomap.core import task_scenario
     from sb3_dtdpg.baselines import check_training_budget, hyperparameter
 
     learning_starts = int(
@@ -98,9 +98,7 @@ def check_budget(spec: RunSpec) -> None:
         return
     registered = gym.spec(spec.env_id).kwargs
     scenario = spec.scenario or registered.get("scenario", "mall")
-    max_steps = int(load_scenario(scenario).mission.max_steps)
-    if registered.get("task") == "paper":
-        max_steps = PAPER_MAX_STEPS
+    max_steps = int(task_scenario(load_scenario(scenario), registered.get("task", "missions")).mission.max_steps)
     check_training_budget(
         spec.episodes * max_steps,
         learning_starts,

@@ -38,18 +38,27 @@ def compare_specs(
     env_id: str = "NomaRadioMap-v0",
     hyperparams: str = "paper",
     observation: str = "goal",
+    episodes: int | None = None,
+    tag: str = "",
+    eval_before_transfer: bool = False,
 ) -> list[RunSpec]:
-    """:return: the runs of a comparison (every algorithm x mode x seed, trained on the radio map)"""
+    """
+    :param episodes: training episodes per run (None: the budget's)
+    :param tag: run-id suffix of these runs (:attr:`RunSpec.tag`)
+    :param eval_before_transfer: also evaluate DT-DPG's network from the end of its first phase
+    :return: the runs of a comparison (every algorithm x mode x seed, trained on the radio map)
+    """
     return [
         RunSpec(
             algo,
             mode,
             seed,
-            budget.episodes,
+            budget.episodes if episodes is None else episodes,
             env_id=env_id,
             scenario=budget.scenario,
             eval_episodes=budget.eval_episodes,
-            eval_before_transfer=False,
+            tag=tag,
+            eval_before_transfer=eval_before_transfer,
             hyperparams=hyperparams,
             observation=observation,
         )

@@ -20,6 +20,7 @@ import pandas as pd
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import plots, tables
 from sb3_dtdpg.experiments.budgets import Budget
+from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, compare_specs, evaluate_planners
 from sb3_dtdpg.experiments.specs import RunSpec
 
 __all__ = ["ENV_ID", "LAST_EPISODES", "PRESETS", "paper_task_specs", "paper_task_tables", "training_success"]
@@ -44,23 +45,21 @@ def paper_task_specs(budget: Budget, seeds: int, modes: Sequence[str] = ("noma",
     :return: DT-DPG and DDPG runs on the paper's task, per preset, mode and seed (seed-major order is left to
         the caller)
     """
+    episodes = budget.task_episodes
     return [
-        RunSpec(
-            algo,
-            mode,
-            seed,
-            budget.task_episodes,
+        spec
+        for preset in PRESETS
+        for spec in compare_specs(
+            budget,
+            seeds,
+            modes=modes,
             env_id=ENV_ID,
-            scenario=budget.scenario,
-            eval_episodes=budget.eval_episodes,
-            tag=f"paper_task_{budget.task_episodes}",
             hyperparams=preset,
             observation="paper",
+            episodes=episodes,
+            tag=f"paper_task_{episodes}",
+            eval_before_transfer=True,
         )
-        for preset in PRESETS
-        for algo in ("dtdpg", "ddpg")
-        for mode in modes
-        for seed in range(seeds)
     ]
 
 
@@ -112,19 +111,11 @@ def _summary(records: pd.DataFrame) -> pd.DataFrame:
 def _with_planners(summary: pd.DataFrame, budget: Budget) -> pd.DataFrame:
     """The summary with the reference planners' rows on the same test missions, and every row's MQI as a fraction
     of the best and of the shortest-path planner's."""
-    from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
-
     modes = [mode.lower() for mode in dict.fromkeys(summary["multiple_access"])]
     planners = pd.DataFrame(evaluate_planners(modes, budget, env_id=ENV_ID)[0])
     planners.insert(0, "preset", "-")
     summary = pd.concat([summary, planners[[c for c in planners if c in summary or c in ("preset", "n")]]])
     return tables.add_planner_fractions(summary.reset_index(drop=True), BEST_PLANNER, SHORTEST_PATH_PLANNER)
-
-
-def _cell(value: float, ci: float, scale: float = 1.0, digits: int = 1) -> str:
-    if not isinstance(value, float | int) or not np.isfinite(value):
-        return "n/a"
-    return f"{scale * value:.{digits}f} ± {scale * ci:.{digits}f}" if np.isfinite(ci) else f"{scale * value:.{digits}f}"
 
 
 def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
@@ -149,9 +140,12 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
             str(row["algorithm"]),
             str(row["multiple_access"]),
             f"{row['n']} {'seeds' if row['preset'] != '-' else 'episodes'}",
-            *(_cell(row[m], row[f"{m}_ci"], 100.0) for m in ("train_success", "train_success_first", "train_success_last")),
-            _cell(row["success_rate"], row["success_rate_ci"], 100.0, 0),
-            _cell(row["mqi"], row["mqi_ci"]),
+            *(
+                tables.format_ci(row[m], row[f"{m}_ci"], scale=100.0)
+                for m in ("train_success", "train_success_first", "train_success_last")
+            ),
+            tables.format_ci(row["success_rate"], row["success_rate_ci"], 0, 100.0),
+            tables.format_ci(row["mqi"], row["mqi_ci"]),
             *(f"{row[c]:.3f}" if np.isfinite(row[c]) else "n/a" for c in ("mqi_of_best", "mqi_of_shortest")),
             str(row["paper_claim"]) if isinstance(row["paper_claim"], str) else "",
         ]
@@ -172,9 +166,13 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
         for _, row in paired.iterrows():
             cells = [str(row["contrast"]), str(row["preset"]), str(row["multiple_access"]), str(row["n"])]
             cells += [
-                _cell(row[m], row[f"{m}_ci"], 100.0) for m in ("train_success", "train_success_first", "train_success_last")
+                tables.format_ci(row[m], row[f"{m}_ci"], scale=100.0)
+                for m in ("train_success", "train_success_first", "train_success_last")
             ]
-            cells += [_cell(row["success_rate"], row["success_rate_ci"], 100.0, 0), _cell(row["mqi"], row["mqi_ci"])]
+            cells += [
+                tables.format_ci(row["success_rate"], row["success_rate_ci"], 0, 100.0),
+                tables.format_ci(row["mqi"], row["mqi_ci"]),
+            ]
             lines.append("| " + " | ".join(cells) + " |")
         lines += ["", "paired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences).", ""]
     return "\n".join(lines)
