@@ -170,9 +170,9 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
 
     th.set_num_threads(1)
     config = CONFIGS[name]
-    env_kwargs = {"reward_phase": "destination", **config.get("env", {})}
-    if config.get("wrapper") == "relative_goal":
-        env_kwargs["observation"] = "goal"  # noma_radiomap.wrappers.RelativeGoalObservation
+    # Without the goal features: positions, destinations, gains and arrived flags (the env's "destinations" layout).
+    observation = "goal" if config.get("wrapper") == "relative_goal" else "destinations"
+    env_kwargs = {"reward_phase": "destination", "observation": observation, **config.get("env", {})}
     eval_env = gym.make(args.env, **env_kwargs)
     if config.get("n_envs"):
         from sb3_dtdpg.vec_env import make_mission_vec_env

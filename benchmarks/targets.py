@@ -10,9 +10,9 @@ and for the comm-aware planner, whose MQI is the yardstick). Both methods use th
 ``--algo-kwargs`` passes further constructor arguments to both methods (e.g. ``'{"gradient_steps": 2}'``); such a
 variant needs a ``--tag``, which names its result files and summary.
 
-``--observation goal`` wraps every env (training and test) in
-:class:`noma_radiomap.wrappers.RelativeGoalObservation`: the goal-conditioned observation extension, reported in
-its own rows; ``paper`` is the paper's observation.
+``--observation`` is the env's observation layout for training and test: ``goal`` (the default: positions,
+destinations, gains, arrived flags, and each robot's direction and distance to its destination) or
+``destinations`` (the same without direction and distance), each reported in its own rows.
 
     python benchmarks/targets.py --methods dtdpg ddpg --seeds 0 1 2 3 4 --observation goal
     python benchmarks/targets.py --methods dtdpg --seeds 0 --episodes 30 --eval-episodes 2   # smoke run
@@ -36,16 +36,13 @@ import numpy as np
 from sb3_dtdpg.common.files import write_json
 
 
-def _make_env(env_id: str, observation: str, **kwargs: Any) -> Any:
+def _make_env(env_id: str, layout: str, **kwargs: Any) -> Any:
     import gymnasium as gym
     from stable_baselines3.common.monitor import Monitor
 
     import noma_radiomap  # noqa: F401
-    from noma_radiomap.wrappers import RelativeGoalObservation
 
-    env = gym.make(env_id, **kwargs)
-    if observation == "goal":
-        env = RelativeGoalObservation(env)
+    env = gym.make(env_id, **{"observation": layout, **kwargs})  # --env-kwargs may name another layout
     return Monitor(env, info_keywords=("is_success",))
 
 
@@ -120,7 +117,7 @@ def planner_mqi(args: argparse.Namespace) -> dict[str, Any]:
     from noma_radiomap.planners import CommAwarePlanner
     from sb3_dtdpg.evaluation import evaluate
 
-    test_env = _make_env(args.env, "paper", channel="rayleigh", reward_phase="mqi", **args.env_kwargs)
+    test_env = _make_env(args.env, args.observation, channel="rayleigh", reward_phase="mqi", **args.env_kwargs)
     summary = evaluate(CommAwarePlanner(), test_env, n_episodes=args.eval_episodes, seed=10_000).summary()
     return {"test_success": summary["success_rate"], "test_mqi": summary["mqi"], "test_mqi_ci": summary["mqi_ci"]}
 
@@ -189,7 +186,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     parser.add_argument("--episodes", type=int, default=500, help="training episodes per run, both phases together")
     parser.add_argument("--eval-episodes", type=int, default=20, help="test missions with Rayleigh fading")
-    parser.add_argument("--observation", choices=["paper", "goal"], default="paper")
+    parser.add_argument("--observation", choices=["goal", "destinations"], default="goal")
     parser.add_argument(
         "--success-threshold",
         type=float,

@@ -48,6 +48,7 @@ __all__ = [
     "base_learning_rate",
     "check_hyperparams",
     "check_training_budget",
+    "default_observation_of",
     "hyperparameter",
     "is_mission_env",
     "make_env",
@@ -162,6 +163,19 @@ def is_mission_env(env_id: str) -> bool:
     if creator is mission_entry_point:  # the registered ids: the env in a TimeLimit of its scenario's length
         return True
     return isinstance(creator, type) and issubclass(creator, NomaRadioMapEnv)
+
+
+def default_observation_of(env_id: str) -> str:
+    """
+    :param env_id: a registered mission env id
+    :return: the observation layout ``gymnasium.make(env_id)`` gives: the id's own ``observation`` keyword, else
+        the default of its task (:func:`noma_radiomap.observations.default_observation`: ``"paper"`` on the
+        paper's task, ``"goal"`` otherwise)
+    """
+    from noma_radiomap.observations import default_observation
+
+    kwargs = gym.spec(env_id).kwargs
+    return kwargs.get("observation") or default_observation(kwargs.get("task", "missions"))
 
 
 def make_env(

@@ -59,6 +59,9 @@ _OBSERVATION_HELP = (
     "Eq. (24), position and gain only (for the paper's task, fixed destinations)"
 )
 
+#: The default of ``--observation`` where the command takes ``--env``: what ``gymnasium.make(env id)`` gives.
+_ENV_OBSERVATION_NOTE = "default: the env id's, paper on NomaRadioMapPaper-v0 and NomaRadioMapPaperOMA-v0, else goal"
+
 
 @contextlib.contextmanager
 def _user_errors(args: argparse.Namespace) -> Iterator[None]:
@@ -136,7 +139,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
 
 def _train_env(args: argparse.Namespace) -> tuple[Any, bool]:
     """The training env of ``train``: mission options for the mission envs only, checked before anything runs."""
-    from sb3_dtdpg.baselines import is_mission_env, make_env
+    from sb3_dtdpg.baselines import default_observation_of, is_mission_env, make_env
 
     mission = is_mission_env(args.env)
     options = {
@@ -150,7 +153,7 @@ def _train_env(args: argparse.Namespace) -> tuple[Any, bool]:
         args.error(f"{', '.join(given)}: {args.env} is not a NomaRadioMap env; these options apply to the mission envs only")
     env_kwargs = {} if args.scenario is None else {"scenario": args.scenario}
     if mission:
-        args.observation = args.observation or "goal"
+        args.observation = args.observation or default_observation_of(args.env)
         env_kwargs["observation"] = args.observation
     with _user_errors(args):
         env = make_env(args.algo, args.env, args.multiple_access, args.channel, env_kwargs)
@@ -293,12 +296,13 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
-    from sb3_dtdpg.baselines import check_hyperparams, is_mission_env
+    from sb3_dtdpg.baselines import check_hyperparams, default_observation_of, is_mission_env
     from sb3_dtdpg.experiments.compare import compare_specs
     from sb3_dtdpg.experiments.runs import BUDGETS, check_budget
 
     if not is_mission_env(args.env):
         args.error(f"--env: compare runs on the NomaRadioMap envs, got {args.env}")
+    args.observation = args.observation or default_observation_of(args.env)
     args.hyperparams = _hyperparams(args, args.algos)
     with _user_errors(args):
         for algo in args.algos:
@@ -422,6 +426,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     env.close()
     mode = str(settings.get("multiple_access", "noma"))
     row = tables.planner_row(tables.ALGO_LABELS.get(settings["algo"], settings["algo"]), mode, result)
+    row["train_timesteps"] = float(model.num_timesteps)
     summary = pd.DataFrame([row])
     title = (
         f"{args.model} on {settings.get('scenario', 'mall')} ({mode.upper()}, {settings['observation']} observation): "
@@ -594,7 +599,7 @@ def _add_hyperparameter_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hyperparams", nargs="+", default=None, metavar="KEY:VALUE", help=_OVERRIDES_HELP)
 
 
-def _add_common_run_options(p: argparse.ArgumentParser) -> None:
+def _add_common_run_options(p: argparse.ArgumentParser, observation_default: str | None, observation_note: str) -> None:
     p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP)
     p.add_argument(  # compare and reproduce take whole presets: their run identities name the preset
         "--hyperparams",
@@ -604,7 +609,9 @@ def _add_common_run_options(p: argparse.ArgumentParser) -> None:
         replacement="--preset",
         help=argparse.SUPPRESS,
     )
-    p.add_argument("--observation", choices=_OBSERVATIONS, default="goal", help=_OBSERVATION_HELP + " (default: goal)")
+    p.add_argument(
+        "--observation", choices=_OBSERVATIONS, default=observation_default, help=f"{_OBSERVATION_HELP} ({observation_note})"
+    )
     p.add_argument("--workers", type=_positive, default=None, help="parallel processes (default: number of CPUs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars; a line per finished run instead")
 
@@ -690,7 +697,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--observation",
         choices=_OBSERVATIONS,
         default=None,
-        help=_OBSERVATION_HELP + " (default: goal on the NomaRadioMap envs)",
+        help=f"{_OBSERVATION_HELP} ({_ENV_OBSERVATION_NOTE})",
     )
     p.add_argument("--tb", default=None, help="TensorBoard log folder (default: <out>/tb)")
     p.add_argument(
@@ -739,7 +746,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--env", type=_env_id, default=_DEFAULT_ENV_ID, help=f"a NomaRadioMap env id (default: {_DEFAULT_ENV_ID})")
     p.add_argument("--scenario", type=_scenario, default=None, help="scenario name or YAML path (default: the budget's)")
-    _add_common_run_options(p)
+    _add_common_run_options(p, None, _ENV_OBSERVATION_NOTE)
     p.set_defaults(func=_cmd_compare)
 
     p = command("reproduce", "every experiment of the paper's Section V; finished runs are not re-run")
@@ -766,7 +773,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="train only the runs of these downlink modes (default: noma oma); the tables use every finished run",
     )
-    _add_common_run_options(p)
+    _add_common_run_options(p, "goal", "default: goal; the paper_task experiment always runs on the paper's state")
     p.set_defaults(func=_cmd_reproduce)
 
     p = command("evaluate", "test a saved model on the test missions and print the table of compare")

@@ -27,10 +27,20 @@ class SavedModel:
     :param settings: the env settings it was trained with (:data:`sb3_dtdpg.env_settings.SETTINGS`), None where unknown
     :param env_id: the env id it was trained on, where known
     :param source: where the settings come from, for messages
+    :param custom_objects: saved attributes to replace on loading (SB3's ``custom_objects``)
     """
 
-    def __init__(self, path: Path, algo: str, settings: dict[str, Any] | None, env_id: str | None, source: str) -> None:
+    def __init__(
+        self,
+        path: Path,
+        algo: str,
+        settings: dict[str, Any] | None,
+        env_id: str | None,
+        source: str,
+        custom_objects: dict[str, Any] | None = None,
+    ) -> None:
         self.path, self.algo, self.settings, self.env_id, self.source = path, algo, settings, env_id, source
+        self.custom_objects = dict(custom_objects or {})
 
     def load(self, env: Any) -> Any:
         """:return: the model, loaded onto ``env`` after checking the env's settings against the recorded ones"""
@@ -38,7 +48,9 @@ class SavedModel:
         from sb3_dtdpg.env_settings import check_settings
 
         check_settings(self.settings, env, f"the model {self.path}")
-        return algorithm_class(self.algo).load(self.path, env=env, device="cpu")
+        # verbose 0: a model saved with verbose=1 (the RL Zoo's) would print SB3's env-wrapping notice on load
+        custom_objects = {"verbose": 0, **self.custom_objects}
+        return algorithm_class(self.algo).load(self.path, env=env, device="cpu", custom_objects=custom_objects)
 
 
 def _model_path(path: str | Path) -> Path:
@@ -55,11 +67,12 @@ def _model_path(path: str | Path) -> Path:
 def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
     """
     :param path: a model zip, or a run folder holding ``model.zip``
-    :param algo: the algorithm (None: from the run's ``result.json``, else from the zip's policy class; a TD3
-        policy is loaded as TD3, which predicts like DDPG)
+    :param algo: the algorithm (None: from the run's ``result.json``, else from the zip's policy class and, for a
+        TD3 policy, the settings that tell SB3's DDPG from TD3)
     :return: the model file's description
     :raises ValueError: a missing file, a file that is not an SB3 model zip, or an unknown algorithm
     """
+    from stable_baselines3.common.buffers import NStepReplayBuffer
     from stable_baselines3.common.save_util import load_from_zip_file
 
     path = _model_path(path)
@@ -74,6 +87,8 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
         spec = json.loads(result_file.read_text()).get("spec", {})
     policy_class = getattr(data.get("policy_class"), "__name__", "")
     algo = algo or spec.get("algo") or _POLICY_ALGOS.get(policy_class)
+    if algo == "td3" and _is_ddpg(data):
+        algo = "ddpg"
     if algo is None:
         raise ValueError(f"{path}: cannot tell the algorithm from its policy class {policy_class!r}; give --algo")
     settings, source = data.get("env_settings"), "the model file"
@@ -88,7 +103,17 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
         source = str(result_file)
     if settings is None:
         settings, source = _settings_from_space(data.get("observation_space")), "the observation length"
-    return SavedModel(path, algo, settings, spec.get("env_id"), source)
+    custom_objects = {}
+    if data.get("replay_buffer_class") is NStepReplayBuffer and data.get("n_steps", 1) > 1:
+        # SB3 chose this buffer itself for n_steps > 1; handed back as a custom class, it would warn that n_steps
+        # is ignored. Left to SB3, it is rebuilt the same way.
+        custom_objects["replay_buffer_class"] = None
+    return SavedModel(path, algo, settings, spec.get("env_id"), source, custom_objects)
+
+
+def _is_ddpg(data: dict[str, Any]) -> bool:
+    """Whether a TD3-policy model was SB3's ``DDPG``: TD3 with one actor update per critic update and no target noise."""
+    return data.get("policy_delay") == 1 and data.get("target_noise_clip") == 0.0
 
 
 def _settings_from_space(space: Any) -> dict[str, Any] | None:

@@ -2,7 +2,8 @@
 ``python -m sb3_dtdpg.train``: the RL Zoo's ``train`` with DT-DPG registered.
 
 Every zoo flag works as documented by rl_zoo3 (``--algo dtdpg --env NomaRadioMap-v0 -tb runs/``,
-``--optimize --storage ... --study-name ...``, ``--trial-id``, ...). Without ``--conf-file`` the package's
+``--optimize --storage ... --study-name ...``, ``--trial-id``, ...), with one default changed: ``--num-threads``
+is 1 unless given (``--num-threads -1``: torch's default). Without ``--conf-file`` the package's
 own ``zoo_configs/<algo>.yml`` is used (:func:`sb3_dtdpg.zoo.default_config`). Needs the ``zoo`` extra
 (``pip install -e ".[zoo]"`` in a clone of the repository).
 
@@ -16,6 +17,21 @@ from typing import Any
 
 #: Keys of a zoo hyperparameter entry that the zoo itself reads (they never reach the model's constructor).
 ZOO_KEYS = ("noise_type", "noise_std")
+#: The zoo's thread flag and this script's default for it: one torch thread, fastest for these small networks
+#: (torch's own default, one thread per core, trains several times slower on a machine busy with other jobs).
+THREADS_FLAG, DEFAULT_THREADS = "--num-threads", "1"
+
+
+def with_default_threads(argv: list[str]) -> list[str]:
+    """
+    :param argv: the command-line arguments, without the program name
+    :return: ``argv`` with ``--num-threads 1`` appended unless it sets the flag (in full, abbreviated or with ``=``)
+    """
+    for arg in argv:
+        name = arg.split("=", 1)[0]
+        if name.startswith("--nu") and THREADS_FLAG.startswith(name):  # argparse takes "--num-t" for the flag
+            return argv
+    return [*argv, THREADS_FLAG, DEFAULT_THREADS]
 
 
 def _checked_manager(base: type) -> type:
@@ -46,6 +62,7 @@ def main() -> None:
     from sb3_dtdpg.overrides import HyperparameterError
 
     register_dtdpg()
+    sys.argv[1:] = with_default_threads(sys.argv[1:])
     # rl_zoo3.train builds the experiment from its own module-level name: use the fixed manager.
     rl_zoo3.train.ExperimentManager = _checked_manager(ExperimentManager)  # type: ignore[misc]
     try:

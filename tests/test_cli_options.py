@@ -5,6 +5,7 @@ import importlib
 import sys
 from importlib.metadata import version
 
+import gymnasium as gym
 import pytest
 
 from sb3_dtdpg.cli import build_parser, main
@@ -122,6 +123,19 @@ def test_train_on_a_mission_env_evaluates_on_its_last_reward_phase(tmp_path, cap
     # the env id's own mode (OMA) when --multiple-access is not given, the goal-conditioned observation by default
     assert (tmp_path / "runs" / "ddpg_oma_s0_goal" / "model.zip").exists()
     assert "last reward phase 'combined'; test (1 Rayleigh episodes, 'combined' reward)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("env_id", "observation"), [("NomaRadioMapPaperOMA-v0", "paper"), ("NomaRadioMapOMA-v0", "goal")])
+def test_train_and_compare_default_to_the_env_ids_observation(env_id, observation, monkeypatch):
+    from sb3_dtdpg import cli
+
+    seen = {}
+    monkeypatch.setattr(cli, "_train_mission", lambda args, *_: seen.setdefault("train", args.observation) and 0)
+    monkeypatch.setattr(cli, "_run_compare", lambda args: seen.setdefault("compare", args.observation))
+    assert main(["train", "--algo", "dtdpg", "--env", env_id, "--scenario", "small", "--episodes", "40"]) == 0
+    assert main(["compare", "--env", env_id, "--budget", "smoke"]) == 0
+    assert seen == {"train": observation, "compare": observation}  # what gymnasium.make(env_id) gives
+    assert gym.make(env_id, scenario="small").unwrapped.observation == observation
 
 
 def test_hyperparams_default_to_the_tuned_set_where_every_algorithm_has_it(capsys):

@@ -1,6 +1,7 @@
 """A saved model records its env settings; ``sb3-dtdpg evaluate`` and ``enjoy --record`` use them."""
 
 import json
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -86,6 +87,7 @@ def test_evaluate_prints_the_compare_table_and_writes_json_and_csv(saved_dtdpg, 
     assert main(["evaluate", str(saved_dtdpg), "--n-episodes", "3", "--json", str(out_json), "--csv", str(out_csv)]) == 0
     printed = capsys.readouterr().out
     assert "DT-DPG" in printed and "Success (%)" in printed and "3 episodes" in printed
+    assert re.search(r"│\s+0\s+│", printed)  # the Train steps cell: this model never trained
     document = json.loads(out_json.read_text())
     assert document["settings"]["scenario"] == "small" and document["settings"]["observation"] == "goal"
     assert document["summary"]["n_episodes"] == 3 and len(document["episodes"]) == 3
@@ -140,3 +142,33 @@ def test_settings_of_a_model_without_a_record_come_from_its_run_or_its_observati
     DDPG("MlpPolicy", gym.make("NomaRadioMap-v0", observation="paper"), learning_starts=10).save(bare)
     saved = read_saved_model(bare, algo="ddpg")
     assert saved.settings == {"observation": "paper"} and saved.source == "the observation length"  # 3 x 2 robots
+
+
+def test_evaluate_is_quiet_about_a_model_saved_with_verbose_on(tmp_path, capsys):
+    path = tmp_path / "verbose.zip"
+    DTDPG("MlpPolicy", small_env(observation="goal"), seed=0, verbose=1).save(path)  # as the RL Zoo saves its models
+    capsys.readouterr()
+    assert main(["evaluate", str(path), "--n-episodes", "1"]) == 0
+    printed = capsys.readouterr().out
+    assert "Wrapping the env" not in printed and "1 episode" in printed
+
+
+@pytest.mark.parametrize(("algo", "label"), [("ddpg", "DDPG"), ("td3", "TD3")])
+def test_sb3_models_load_as_their_algorithm_without_warnings(algo, label, tmp_path, capsys):
+    import warnings
+
+    from stable_baselines3 import TD3
+    from stable_baselines3.common.buffers import NStepReplayBuffer
+
+    from sb3_dtdpg.model_files import read_saved_model
+
+    path = tmp_path / f"{algo}.zip"
+    (DDPG if algo == "ddpg" else TD3)("MlpPolicy", small_env(observation="goal"), n_steps=3, seed=0).save(path)
+    saved = read_saved_model(path)
+    assert saved.algo == algo  # both have a TD3 policy; DDPG is TD3 without delay and target noise
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # SB3 warns "n_steps=3 is ignored" when its own n-step buffer comes back
+        model = saved.load(small_env(observation="goal"))
+    assert isinstance(model.replay_buffer, NStepReplayBuffer) and model.replay_buffer.n_steps == 3
+    assert main(["evaluate", str(path), "--n-episodes", "1"]) == 0
+    assert f"│ {label} " in capsys.readouterr().out

@@ -37,3 +37,19 @@ def test_a_bad_hyperparameter_file_is_one_error_line(tmp_path, entry, message):
     if "learnin_rate" in entry:
         assert "did you mean 'learning_rate'" in errors[0]
     assert not (tmp_path / "logs").exists()  # nothing created
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["--algo", "dtdpg"], ["--algo", "dtdpg", "--num-threads", "1"]),
+        (["--num-threads", "4"], ["--num-threads", "4"]),
+        (["--num-threads=-1"], ["--num-threads=-1"]),
+        (["--num-t", "2"], ["--num-t", "2"]),  # argparse's abbreviation of the zoo's flag
+        (["--n-trials", "2"], ["--n-trials", "2", "--num-threads", "1"]),
+    ],
+)
+def test_one_torch_thread_unless_the_command_sets_it(argv, expected):
+    from sb3_dtdpg.train import with_default_threads
+
+    assert with_default_threads(argv) == expected

@@ -20,7 +20,7 @@ from noma_radiomap import geometry, rewards
 from noma_radiomap.compiled import compiled
 from noma_radiomap.downlink import MULTIPLE_ACCESS, allocate_rows, downlink, in_outage
 from noma_radiomap.motion import GridMotion
-from noma_radiomap.observations import DEFAULT_OBSERVATION, GAIN_DB_RANGE, Observer, check_observation
+from noma_radiomap.observations import GAIN_DB_RANGE, Observer, check_observation, default_observation
 from noma_radiomap.propagation import dbm_to_watt, linear_to_db, rayleigh_fading
 from noma_radiomap.radiomap import RadioMap
 from noma_radiomap.sampling import MissionSampler
@@ -156,7 +156,7 @@ class MissionCore:
             if value not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
         if observation is None:
-            observation = "paper" if task == "paper" else DEFAULT_OBSERVATION
+            observation = default_observation(task)
         check_observation(observation)
         sc = load(scenario)
         # The map does not depend on the missions: the scenario as loaded hits the map cache

@@ -33,6 +33,15 @@ GAIN_DB_RANGE: tuple[float, float] = (-130.0, -30.0)
 DISTANCE_SCALE = 10.0
 
 
+def default_observation(task: str) -> str:
+    """
+    :param task: the env's task (``"missions"`` or ``"paper"``)
+    :return: the layout an env of that task gets without ``observation=``: the paper's state, Eq. (24), on the
+        paper's task (fixed destinations), :data:`DEFAULT_OBSERVATION` otherwise
+    """
+    return "paper" if task == "paper" else DEFAULT_OBSERVATION
+
+
 def check_observation(observation: str) -> None:
     """:raises ValueError: ``observation`` is not one of :data:`OBSERVATIONS`"""
     if observation not in OBSERVATIONS:

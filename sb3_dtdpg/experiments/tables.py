@@ -262,7 +262,7 @@ def table_notes(summary: pd.DataFrame) -> list[str]:
     :return: lines of text
     """
     notes = [
-        "mean ± 95 % CI (t-interval over seeds; planners: over test episodes); n/a: one sample, no CI",
+        "mean ± 95 % CI (t-interval over what n counts: seeds, or test episodes); n/a: one sample, no CI",
         "MQI IQM: interquartile mean with a 95 % percentile CI from the stratified bootstrap of Agarwal et al. (2021), "
         "computed with scipy.stats, same samples",
     ]
