@@ -105,8 +105,9 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
         settings, source = _settings_from_space(data.get("observation_space")), "the observation length"
     custom_objects = {}
     if data.get("replay_buffer_class") is NStepReplayBuffer and data.get("n_steps", 1) > 1:
-        # SB3 chose this buffer itself for n_steps > 1; handed back as a custom class, it would warn that n_steps
-        # is ignored. Left to SB3, it is rebuilt the same way.
+        # SB3 chose this buffer itself for n_steps > 1; handed back as a custom class on load, it warns that n_steps
+        # is ignored (the warning of DLR-RM/stable-baselines3#2275, which load trips). Left to SB3, it is rebuilt
+        # the same way.
         custom_objects["replay_buffer_class"] = None
     return SavedModel(path, algo, settings, spec.get("env_id"), source, custom_objects)
 

@@ -33,6 +33,7 @@ import noma_radiomap  # noqa: F401  (registers the NomaRadioMap env ids)
 from sb3_dtdpg.baselines import check_training_budget
 from sb3_dtdpg.common.phases import REPLAY_HANDLINGS
 from sb3_dtdpg.dtdpg import DTDPG
+from sb3_dtdpg.env_settings import record
 from sb3_dtdpg.missions import default_phases
 
 ALGO_NAME = "dtdpg"
@@ -191,7 +192,9 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
     - A budget that cannot train (``n_timesteps <= learning_starts``) is an error
       (:func:`sb3_dtdpg.baselines.check_training_budget`).
 
-    For DT-DPG training runs it also puts the curriculum's phase checkpoints (``phase_<k>_<name>.zip``)
+    Every saved model records the env settings it was trained with (:func:`sb3_dtdpg.env_settings.record`), so
+    ``sb3-dtdpg evaluate`` / ``enjoy`` refuse a mismatched env for SB3's algorithms too. For DT-DPG training runs it
+    also puts the curriculum's phase checkpoints (``phase_<k>_<name>.zip``)
     in the run's log folder, unless the hyperparameters set ``curriculum_save_path`` themselves.
     """
 
@@ -242,6 +245,11 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
         if self.algo == ALGO_NAME and not self.optimize_hyperparameters:
             hyperparams.setdefault("curriculum_save_path", self.save_path)
         return (hyperparams, *others)
+
+    def save_trained_model(self, model: Any) -> None:
+        """Save as the zoo does, with the env settings recorded for every algorithm (DTDPG's ``save`` does it too)."""
+        record(model)
+        super().save_trained_model(model)
 
 
 def _default_learning_starts(algo_class: type) -> int | None:

@@ -303,6 +303,7 @@ def test_train_then_enjoy(algo: str, tmp_path: Path) -> None:
     model = algo_class.load(model_path, device="cpu")
     assert type(model) is algo_class
     assert model.num_timesteps == 400
+    assert model.env_settings["observation"] == "goal" and model.env_settings["multiple_access"] == "noma"
 
     config = load_config(run_dir)
     with open(CONFIGS / f"{algo}.yml") as f:
