@@ -1,6 +1,7 @@
-"""The learning benchmarks (benchmarks/targets.py) train on the observation layout they are asked for."""
+"""Benchmark scripts: `targets.py` trains on the observation layout it names, `paper_task_runs.py` tabulates runs."""
 
 import importlib.util
+import json
 from pathlib import Path
 
 import gymnasium as gym
@@ -33,3 +34,25 @@ def test_targets_env_kwargs_may_name_another_layout():
     targets = load_script("targets")
     env = targets._make_env("NomaRadioMap-v0", "goal", scenario="small", observation="destinations")
     assert env.unwrapped.observation == "destinations"
+
+
+def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
+    from stable_baselines3.common.logger import configure
+
+    paper_task_runs = load_script("paper_task_runs")
+    for algo, successes, mqi in (("ddpg", [0, 0, 1, 1], 800.0), ("dtdpg", [1, 1, 1, 0], 850.0)):
+        run_id = f"{algo}_noma_s0_hp1"
+        logger = configure(str(tmp_path / "tb" / run_id), ["tensorboard"])
+        for episode, success in enumerate(successes, start=1):
+            logger.record("mission/success", float(success))
+            logger.record("episode/number", episode)
+            logger.dump(episode)
+        logger.close()
+        (tmp_path / "runs" / run_id).mkdir(parents=True)
+        spec = {"algo": algo, "hyperparams": "paper", "overrides": [["gamma", "0.95"]], "multiple_access": "noma", "seed": 0}
+        result = {"spec": spec, "eval": {"summary": {"success_rate": 1.0, "mqi": mqi}}, "train": {"wall_s": 2.0}}
+        (tmp_path / "runs" / run_id / "result.json").write_text(json.dumps(result))
+    rows = paper_task_runs.run_rows(tmp_path)
+    assert list(rows["algo"]) == ["dtdpg", "ddpg"] and set(rows["overrides"]) == {"gamma:0.95"}
+    assert list(rows["train_success"]) == [0.75, 0.5] and list(rows["episodes"]) == [4, 4]
+    assert list(rows["test_mqi"]) == [850.0, 800.0]
