@@ -11,7 +11,8 @@ Table I preset with a single value changed on the paper's task::
 
 Training success is the share of training episodes in which every robot reached its destination (all episodes,
 the first 100, the last 100; :func:`sb3_dtdpg.experiments.paper_task.training_success` on the run's TensorBoard
-folder); the test columns are the run's 20 Rayleigh test missions.
+folder); the test columns are the run's 20 Rayleigh test missions. Below the per-run table: mean and 95 % CI
+per configuration (t-interval over seeds) and DT-DPG - DDPG paired by seed.
 """
 
 from __future__ import annotations
@@ -22,7 +23,12 @@ from pathlib import Path
 
 import pandas as pd
 
+from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments.paper_task import training_success
+from sb3_dtdpg.experiments.tables import paired_differences
+
+METRICS = ("train_success", "train_success_first100", "train_success_last100", "test_success", "test_mqi")
+CONFIGURATION = ["preset", "overrides", "multiple_access"]
 
 
 def run_rows(out: Path) -> pd.DataFrame:
@@ -57,6 +63,39 @@ def run_rows(out: Path) -> pd.DataFrame:
     return frame.sort_values(["overrides", "algo", "seed"], ascending=[True, False, True]) if rows else frame
 
 
+def summary_rows(frame: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param frame: output of :func:`run_rows`
+    :return: per configuration and algorithm: ``n`` (seeds) and ``<metric> ± <95 % CI>`` text per metric
+    """
+    rows = []
+    for key, group in frame.groupby([*CONFIGURATION, "algo"], sort=False):
+        row = dict(zip([*CONFIGURATION, "algo"], key, strict=True))
+        row["n"] = len(group)
+        for metric in METRICS:
+            row[metric] = _with_ci(*mean_ci(group[metric].to_numpy(dtype=float)), metric)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def paired_rows(frame: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param frame: output of :func:`run_rows`
+    :return: DT-DPG - DDPG per configuration on the seeds both have: ``n`` (pairs) and ``<difference> ± <95 % CI>``
+    """
+    differences = paired_differences(frame, "algo", "dtdpg", "ddpg", by=CONFIGURATION, metrics=METRICS)
+    for metric in METRICS:
+        differences[metric] = [
+            _with_ci(value, half, metric) for value, half in zip(differences[metric], differences[f"{metric}_ci"], strict=True)
+        ]
+    return differences[[*CONFIGURATION, "contrast", "n", *METRICS]]
+
+
+def _with_ci(value: float, half: float, metric: str) -> str:
+    scale = 1 if metric == "test_mqi" else 100
+    return f"{scale * value:.1f} ± {scale * half:.1f}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
     parser.add_argument("out", type=Path, help="the output folder of the train runs")
@@ -74,6 +113,12 @@ def main() -> None:
     for column in ("train_success", "train_success_first100", "train_success_last100", "test_success"):
         shown[column] = (100 * shown[column]).round(1)
     print(shown.to_string(index=False, float_format=lambda value: f"{value:.1f}"))
+    print("\nmean ± 95 % CI (t-interval over seeds); success in %")
+    print(summary_rows(frame).to_string(index=False))
+    paired = paired_rows(frame)
+    if not paired.empty:
+        print("\npaired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences); success in points")
+        print(paired.to_string(index=False))
 
 
 if __name__ == "__main__":

@@ -56,3 +56,8 @@ def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
     assert list(rows["algo"]) == ["dtdpg", "ddpg"] and set(rows["overrides"]) == {"gamma:0.95"}
     assert list(rows["train_success"]) == [0.75, 0.5] and list(rows["episodes"]) == [4, 4]
     assert list(rows["test_mqi"]) == [850.0, 800.0]
+    paired = paper_task_runs.paired_rows(rows)
+    assert list(paired["contrast"]) == ["dtdpg - ddpg"] and list(paired["n"]) == [1]
+    assert paired["train_success"].iloc[0].startswith("25.0 ± ") and paired["test_mqi"].iloc[0].startswith("50.0 ± ")
+    summary = paper_task_runs.summary_rows(rows)
+    assert list(summary["algo"]) == ["dtdpg", "ddpg"] and list(summary["train_success"].str[:4]) == ["75.0", "50.0"]

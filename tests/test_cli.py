@@ -217,12 +217,18 @@ def _every_step(init):
     return wrapped
 
 
-def test_reproduce_trains_only_the_chosen_experiments(tmp_path):
+def test_reproduce_trains_only_the_chosen_experiments(tmp_path, capsys):
     with pytest.raises(ValueError, match=r"experiments: unknown \['table_iii'\]"):
         run_reproduce(tmp_path, budget="_micro", seeds=1, experiments=["table_iii"])
     tables = run_reproduce(tmp_path, budget="_micro", seeds=1, progress=False, experiments=["ddpg_vs_dtdpg"])
     experiments = reproduce_specs(MICRO, seeds=1)
     chosen = {s.run_id for s in experiments["ddpg_vs_dtdpg"]}
+    every = {s.run_id for specs in experiments.values() for s in specs}
+    # the closing line counts the runs asked for, then those of every experiment
+    closing = capsys.readouterr().out.strip().splitlines()[-1]
+    assert closing.startswith(
+        f"reproduce: {len(chosen)} of {len(chosen)} runs finished (of all experiments' {len(every)} runs, "
+    )
     for spec in {s for specs in experiments.values() for s in specs}:
         assert result_path(tmp_path, spec).exists() == (spec.run_id in chosen), spec.run_id
     # the other experiments' tables are drawn from the finished runs they share (the radio-map DT-DPG runs)

@@ -268,9 +268,9 @@ def run_reproduce(
         unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
         # Seed by seed, so that an interrupted job has whole seeds of every experiment.
         unique.sort(key=lambda spec: spec.seed)
+        modes = set(multiple_access or ("noma", "oma"))
+        wanted = {s.run_id for name in (chosen or EXPERIMENTS) for s in experiments[name] if s.multiple_access in modes}
         if train:
-            modes = set(multiple_access or ("noma", "oma"))
-            wanted = {s.run_id for name in (chosen or EXPERIMENTS) for s in experiments[name] if s.multiple_access in modes}
             report = run_many(
                 [s for s in unique if s.run_id in wanted],
                 out,
@@ -358,9 +358,13 @@ def run_reproduce(
         if dip is not None:
             out_tables["transfer_dip"] = dip
         _figures(out, budget, experiments, results, base_lr)
-        finished = sum(result is not None for result in results.values())
+        finished = sum(results[run_id] is not None for run_id in wanted)
+        in_all = sum(result is not None for result in results.values())
+        counts = f"{finished} of {len(wanted)} runs finished"
+        if len(wanted) < len(results):
+            counts += f" (of all experiments' {len(results)} runs, {in_all})"
         print(
-            f"reproduce: {finished} of {len(results)} runs finished; tables (.md, .csv) and figures (.png) in {out}/, "
+            f"reproduce: {counts}; tables (.md, .csv) and figures (.png) in {out}/, "
             f"run folders in {out}/runs/, TensorBoard: tensorboard --logdir {out}/tb"
         )
         return out_tables
