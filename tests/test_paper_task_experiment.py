@@ -102,3 +102,25 @@ def test_reproduce_trains_only_the_chosen_modes(tmp_path):
     assert not any(result_path(tmp_path, s).exists() for s in specs if s.multiple_access == "noma")
     learners = tables["paper_task"][tables["paper_task"]["preset"] != "-"]
     assert set(tables["paper_task"]["multiple_access"]) == {"OMA"} and len(learners) == 4
+
+
+def test_runs_of_two_folders_merge_into_one_table_and_conflicts_are_refused():
+    def runs(preset, algorithm, seeds, mqi=0.0):
+        group = f"{algorithm}_{preset}"
+        return pd.DataFrame(
+            [
+                {"group": group, "preset": preset, "algorithm": algorithm, "multiple_access": "NOMA", "seed": seed}
+                | {"success_rate": 1.0, "mqi": mqi + seed, "train_success": 0.5}
+                for seed in seeds
+            ]
+        )
+
+    earlier = pd.concat([runs("tuned", "DDPG", [0, 1]), runs("paper", "DT-DPG", [0, 1])])
+    later = pd.concat([runs("tuned", "DDPG", [1, 2]), runs("paper", "DT-DPG", [2])])
+    merged = paper_task.merge_runs([earlier, later])
+    # each run once (seed 1 of DDPG is in both with the same results), Table I first, seeds in order
+    assert list(zip(merged["preset"], merged["seed"], strict=True)) == [("paper", s) for s in range(3)] + [
+        ("tuned", s) for s in range(3)
+    ]
+    with pytest.raises(ValueError, match="run DDPG_tuned seed 1: different results"):
+        paper_task.merge_runs([earlier, runs("tuned", "DDPG", [1], mqi=5.0)])

@@ -209,6 +209,28 @@ def test_run_many_uses_the_pool_that_ends_with_its_parent():
         pool.shutdown()
 
 
+UNGUARDED = textwrap.dedent(
+    """
+    import collections, sys
+    from sb3_dtdpg.experiments.pool import RunReport, run_in_pool
+
+    Job = collections.namedtuple("Job", "run_id")
+    report = RunReport()
+    run_in_pool(print, [(Job("r0"),)], sys.argv[1], 1, report, progress=False)  # no __main__ guard
+    print(report.failed["r0"])
+    """
+)
+
+
+def test_a_run_pool_started_from_a_script_without_main_guard_says_so(tmp_path):
+    script = tmp_path / "unguarded.py"
+    script.write_text(UNGUARDED)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    done = subprocess.run([sys.executable, str(script), str(tmp_path)], capture_output=True, text=True, env=env, timeout=120)
+    assert done.stdout.strip().splitlines()[-1].startswith("BrokenProcessPool: ")
+    assert 'missing `if __name__ == "__main__":` guard' in done.stdout
+
+
 # ---------------------------------------------------------------------------------------------- train
 TRAIN = [
     "train",

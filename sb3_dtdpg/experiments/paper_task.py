@@ -23,7 +23,16 @@ from sb3_dtdpg.experiments.budgets import Budget
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, compare_specs, evaluate_planners
 from sb3_dtdpg.experiments.specs import RunSpec
 
-__all__ = ["ENV_ID", "LAST_EPISODES", "PRESETS", "paper_task_specs", "paper_task_tables", "training_success"]
+__all__ = [
+    "ENV_ID",
+    "LAST_EPISODES",
+    "PRESETS",
+    "merge_runs",
+    "paper_task_specs",
+    "paper_task_tables",
+    "training_success",
+    "write_tables",
+]
 
 #: The paper's task (the OMA runs pass ``multiple_access="oma"``).
 ENV_ID = "NomaRadioMapPaper-v0"
@@ -178,19 +187,17 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
     return "\n".join(lines)
 
 
-def paper_task_tables(
-    out: Path, budget: Budget, specs: Sequence[RunSpec], results: dict[str, Any], progress: bool = True
-) -> pd.DataFrame | None:
+def write_tables(out: Path, budget: Budget, records: pd.DataFrame, progress: bool = True) -> pd.DataFrame:
     """
-    Write ``paper_task.md`` / ``paper_task.csv`` (per preset, algorithm and mode), ``paper_task_runs.csv`` (per run),
-    ``paper_task_paired.csv`` (DT-DPG - DDPG by seed) and ``fig_paper_task_success.png`` (the training success
-    rate per episode, a rolling mean over 20 episodes) from the finished runs of :func:`paper_task_specs`.
+    Write ``paper_task.md``, ``paper_task.csv``, ``paper_task_runs.csv`` and ``paper_task_paired.csv`` (see
+    :func:`paper_task_tables`) from per-run records.
 
-    :return: the summary (with the reference planners' rows), or None when no run has finished
+    :param out: output folder
+    :param budget: the runs' budget (for the planners' rows and the title)
+    :param records: one row per run, the columns of ``paper_task_runs.csv``
+    :param progress: print the Markdown table
+    :return: the summary, with the reference planners' rows
     """
-    records = _records(out, specs, results)
-    if records.empty:
-        return None
     summary = _with_planners(_summary(records), budget)
     paired = tables.paired_differences(
         records, "algorithm", "DT-DPG", "DDPG", by=("preset", "multiple_access"), metrics=_METRICS
@@ -204,6 +211,47 @@ def paper_task_tables(
     summary.to_csv(out / "paper_task.csv", index=False)
     records.to_csv(out / "paper_task_runs.csv", index=False)
     paired.to_csv(out / "paper_task_paired.csv", index=False)
+    if progress:
+        print(text)
+    return summary
+
+
+def merge_runs(run_tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
+    """
+    The per-run records of several output folders of the experiment as one table, e.g. the ``paper_task_runs.csv``
+    of a job that ran seeds 0-2 and of one that ran seeds 3 and 4.
+
+    :param run_tables: per-run records (the columns of ``paper_task_runs.csv``)
+    :return: one row per run, by preset (:data:`PRESETS` order), algorithm (DT-DPG first), mode (NOMA first), seed
+    :raises ValueError: a run (group and seed) is in more than one table with other results
+    """
+    merged = pd.concat(run_tables, ignore_index=True)
+    key = ["group", "seed"]
+    for (group, seed), runs in merged.groupby(key, sort=False):
+        if len(runs) > 1 and len(runs[["success_rate", "mqi", "train_success"]].drop_duplicates()) > 1:
+            raise ValueError(f"run {group} seed {seed}: different results in two tables ({len(runs)} rows)")
+    merged = merged.drop_duplicates(subset=key, keep="first")
+    order = merged["preset"].map({preset: i for i, preset in enumerate(PRESETS)})
+    merged = merged.assign(_order=order).sort_values(
+        ["_order", "algorithm", "multiple_access", "seed"], ascending=[True, False, True, True], kind="stable"
+    )
+    return merged.drop(columns="_order").reset_index(drop=True)
+
+
+def paper_task_tables(
+    out: Path, budget: Budget, specs: Sequence[RunSpec], results: dict[str, Any], progress: bool = True
+) -> pd.DataFrame | None:
+    """
+    Write ``paper_task.md`` / ``paper_task.csv`` (per preset, algorithm and mode), ``paper_task_runs.csv`` (per run),
+    ``paper_task_paired.csv`` (DT-DPG - DDPG by seed) and ``fig_paper_task_success.png`` (the training success
+    rate per episode, a rolling mean over 20 episodes) from the finished runs of :func:`paper_task_specs`.
+
+    :return: the summary (with the reference planners' rows), or None when no run has finished
+    """
+    records = _records(out, specs, results)
+    if records.empty:
+        return None
+    summary = write_tables(out, budget, records, progress)
     groups: dict[str, list[Path]] = {}
     for spec in specs:
         if results.get(spec.run_id) is not None:
@@ -217,6 +265,4 @@ def paper_task_tables(
         title=f"The paper's task: training success per episode\n({budget.scenario or 'mall'}, {budget.name} budget; "
         "dotted: DT-DPG's transfer)",
     )
-    if progress:
-        print(text)
     return summary

@@ -17,6 +17,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,7 @@ from typing import Any
 from sb3_dtdpg.experiments.specs import RunSpec
 from sb3_dtdpg.experiments.storage import read_progress
 
-__all__ = ["RunBars", "RunReport", "run_in_pool", "worker_pool"]
+__all__ = ["RunBars", "RunReport", "failure_message", "run_in_pool", "worker_pool"]
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -112,12 +113,26 @@ def run_in_pool(
                         if on_finish is not None:
                             on_finish(spec.run_id)
                     except Exception as error:  # a failed run must not take the others down
-                        report.failed[spec.run_id] = f"{type(error).__name__}: {error}"
+                        report.failed[spec.run_id] = failure_message(error)
                         bars.finished(spec.run_id, f"{spec.run_id} FAILED")
         except KeyboardInterrupt:
             executor.shutdown(wait=False, cancel_futures=True)
             raise
         executor.shutdown()
+
+
+def failure_message(error: BaseException) -> str:
+    """
+    :param error: what a run raised, or what its future raised when its worker died
+    :return: the line :attr:`RunReport.failed` records; a dead worker's says what commonly kills one
+    """
+    message = f"{type(error).__name__}: {error}"
+    if isinstance(error, BrokenProcessPool):
+        message += (
+            " (a worker process died: out of memory, killed, or, when this runs from a script, a missing "
+            '`if __name__ == "__main__":` guard around the call, which spawned workers need)'
+        )
+    return message
 
 
 class RunBars:
