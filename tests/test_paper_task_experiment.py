@@ -102,6 +102,7 @@ def test_reproduce_trains_only_the_chosen_modes(tmp_path):
     assert not any(result_path(tmp_path, s).exists() for s in specs if s.multiple_access == "noma")
     learners = tables["paper_task"][tables["paper_task"]["preset"] != "-"]
     assert set(tables["paper_task"]["multiple_access"]) == {"OMA"} and len(learners) == 4
+    assert "| OMA | 1 seed |" in (tmp_path / "paper_task.md").read_text()
 
 
 def test_runs_of_two_folders_merge_into_one_table_and_conflicts_are_refused():

@@ -148,7 +148,7 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
             str(row["preset"]),
             str(row["algorithm"]),
             str(row["multiple_access"]),
-            f"{row['n']} {'seeds' if row['preset'] != '-' else 'episodes'}",
+            f"{row['n']} {('seed' if row['n'] == 1 else 'seeds') if row['preset'] != '-' else 'episodes'}",
             *(
                 tables.format_ci(row[m], row[f"{m}_ci"], scale=100.0)
                 for m in ("train_success", "train_success_first", "train_success_last")
