@@ -41,6 +41,7 @@ _ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
 _PRESETS = ("paper", "tuned")
 _OBSERVATIONS = ("goal", "destinations", "paper")
 _DEFAULT_ENV_ID = "NomaRadioMap-v0"
+_EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task")
 _PRESET_HELP = (
     "hyperparameter set. tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; "
     "the default); paper: Table I (the default of td3, sac and tqc, which have no tuned set)"
@@ -762,7 +763,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--experiments",
         nargs="+",
-        choices=("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task"),
+        choices=_EXPERIMENTS,
         default=None,
         help="train only the runs of these experiments (default: all); the tables use every finished run",
     )

@@ -146,9 +146,11 @@ def test_overrides_reach_the_model(tmp_path, capsys):
 def test_the_option_choices_are_the_libraries(monkeypatch):
     from noma_radiomap.registration import OBSERVATIONS
     from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID, HYPERPARAMS
+    from sb3_dtdpg.experiments.reproduce import EXPERIMENTS
 
     assert cli._ALGORITHMS == ALGORITHMS and cli._OBSERVATIONS == OBSERVATIONS
     assert set(cli._PRESETS) == set(HYPERPARAMS) and cli._DEFAULT_ENV_ID == DEFAULT_ENV_ID
+    assert cli._EXPERIMENTS == EXPERIMENTS
 
 
 def test_help_imports_neither_torch_nor_sb3():
