@@ -36,7 +36,7 @@ from typing import Any
 __all__ = ["build_parser", "main"]
 
 # The choices of the options, spelled here so that --help needs no heavy import (tests/test_cli_errors.py checks
-# them against sb3_dtdpg.baselines and noma_radiomap.registration).
+# them against sb3_dtdpg.baselines, sb3_dtdpg.experiments.reproduce and noma_radiomap.registration).
 _ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
 _PRESETS = ("paper", "tuned")
 _OBSERVATIONS = ("goal", "destinations", "paper")
