@@ -225,12 +225,12 @@ def merge_runs(run_tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
     :return: one row per run, by preset (:data:`PRESETS` order), algorithm (DT-DPG first), mode (NOMA first), seed
     :raises ValueError: a run (group and seed) is in more than one table with other results
     """
-    merged = pd.concat(run_tables, ignore_index=True)
     key = ["group", "seed"]
-    for (group, seed), runs in merged.groupby(key, sort=False):
-        if len(runs) > 1 and len(runs[["success_rate", "mqi", "train_success"]].drop_duplicates()) > 1:
-            raise ValueError(f"run {group} seed {seed}: different results in two tables ({len(runs)} rows)")
-    merged = merged.drop_duplicates(subset=key, keep="first")
+    merged = pd.concat(run_tables, ignore_index=True).drop_duplicates(subset=[*key, "success_rate", "mqi", "train_success"])
+    clashes = merged[merged.duplicated(subset=key, keep=False)]
+    if not clashes.empty:
+        group, seed = clashes.iloc[0][key]
+        raise ValueError(f"run {group} seed {seed}: different results in two tables ({len(clashes)} rows)")
     order = merged["preset"].map({preset: i for i, preset in enumerate(PRESETS)})
     merged = merged.assign(_order=order).sort_values(
         ["_order", "algorithm", "multiple_access", "seed"], ascending=[True, False, True, True], kind="stable"
