@@ -18,11 +18,12 @@ from gymnasium.utils import seeding
 
 from noma_radiomap import geometry, rewards
 from noma_radiomap.compiled import compiled
-from noma_radiomap.downlink import MULTIPLE_ACCESS, allocate_rows, downlink, in_outage
-from noma_radiomap.motion import GridMotion
+from noma_radiomap.downlink import MULTIPLE_ACCESS, allocate_rows, in_outage, sinr_rows, transmission_result
+from noma_radiomap.motion import GridMotion, move_robots
 from noma_radiomap.observations import GAIN_DB_RANGE, Observer, check_observation, default_observation
 from noma_radiomap.propagation import dbm_to_watt, linear_to_db, rayleigh_fading
 from noma_radiomap.radiomap import RadioMap
+from noma_radiomap.rewards import component_rows, weighted_rows
 from noma_radiomap.sampling import MissionSampler
 from noma_radiomap.scenario import Scenario, load_scenario
 
@@ -43,11 +44,10 @@ SUMMARY_KEYS: tuple[str, ...] = ("is_success", "mqi", "mission_time", "outage_st
 RESET_FIRST = "call reset() first"
 #: The summary values that are one Python scalar per mission in an ``info``, and their type
 _SCALAR_SUMMARIES: dict[str, type] = {"is_success": bool, "mqi": float}
-_INFO_ROW_KEYS = ("reward_components", *INFO_KEYS, *SUMMARY_KEYS)
 _ALL = slice(None)
 
 
-@dataclass
+@dataclass(slots=True)
 class MissionStep:
     """The outcome of one step of the stepped missions (arrays over the stepped rows)."""
 
@@ -67,27 +67,60 @@ class MissionStep:
 
     def info(self, k: int) -> dict[str, Any]:
         """The ``info`` of the ``k``-th stepped mission: ``reward_components``, :data:`INFO_KEYS` and the episode
-        summary as of the step (:data:`SUMMARY_KEYS`)."""
-        info: dict[str, Any] = {"reward_components": {name: float(value[k]) for name, value in self.components.items()}}
-        for key in INFO_KEYS:
-            info[key] = getattr(self, key)[k]
-        info.update(summary_row(self.summary, k))
-        return info
+        summary as of the step (:data:`SUMMARY_KEYS`), in this order."""
+        summary = self.summary
+        return {
+            "reward_components": {name: float(value[k]) for name, value in self.components.items()},
+            "rate_bps": self.rate_bps[k],
+            "sinr_db": self.sinr_db[k],
+            "outage": self.outage[k],
+            "power_w": self.power_w[k],
+            "gain_db": self.gain_db[k],
+            "decoding_order": self.decoding_order[k],
+            "is_success": bool(summary["is_success"][k]),
+            "mqi": float(summary["mqi"][k]),
+            "mission_time": summary["mission_time"][k],
+            "outage_steps": summary["outage_steps"][k],
+        }
 
     def infos(self) -> list[dict[str, Any]]:
-        """:meth:`info` of every stepped mission, in row order (built column by column: faster for many missions)."""
+        """
+        :meth:`info` of every stepped mission, in row order, the same keys in the same order (a test compares
+        them). Both are written as dict displays, the fastest way CPython has to build them: for 16 missions the
+        infos cost as much as the step's physics.
+        """
         names = tuple(self.components)
-        columns = [
-            [
-                dict(zip(names, values, strict=True))
-                for values in zip(*(value.tolist() for value in self.components.values()), strict=True)
-            ]
+        columns = zip(*(value.tolist() for value in self.components.values()), strict=True)
+        summary = self.summary
+        return [
+            {
+                "reward_components": dict(zip(names, components, strict=True)),
+                "rate_bps": rate,
+                "sinr_db": sinr,
+                "outage": outage,
+                "power_w": power,
+                "gain_db": gain,
+                "decoding_order": order,
+                "is_success": success,
+                "mqi": mqi,
+                "mission_time": mission_time,
+                "outage_steps": outage_steps,
+            }
+            for components, rate, sinr, outage, power, gain, order, success, mqi, mission_time, outage_steps in zip(
+                columns,
+                self.rate_bps,
+                self.sinr_db,
+                self.outage,
+                self.power_w,
+                self.gain_db,
+                self.decoding_order,
+                summary["is_success"].tolist(),
+                summary["mqi"].tolist(),
+                summary["mission_time"],
+                summary["outage_steps"],
+                strict=True,
+            )
         ]
-        columns += [list(getattr(self, key)) for key in INFO_KEYS]
-        columns += [
-            self.summary[key].tolist() if key in _SCALAR_SUMMARIES else list(self.summary[key]) for key in SUMMARY_KEYS
-        ]
-        return [dict(zip(_INFO_ROW_KEYS, row, strict=True)) for row in zip(*columns, strict=True)]
 
 
 def summary_row(summaries: dict[str, np.ndarray], j: int) -> dict[str, Any]:
@@ -186,6 +219,7 @@ class MissionCore:
         self._interferer_power_w = dbm_to_watt(np.array([i.power_dbm for i in sc.interferers], dtype=np.float64))
         self.max_power_w = float(dbm_to_watt(sc.ap.max_power_dbm))
         self._noise_w_per_hz = float(dbm_to_watt(sc.radio.noise_dbm_per_hz))
+        self._bandwidth_per_robot_hz = float(sc.radio.bandwidth_per_robot_hz)
         mission = sc.mission
         self.reward_constants = rewards.RewardConstants(
             time_cost=mission.time_cost,
@@ -264,7 +298,7 @@ class MissionCore:
                 self._distance_maps = np.zeros((self.num_missions, self.n_robots, cells))
             for i in rows:
                 self._distance_maps[i] = np.stack([self.radio_map.distance_field(d).ravel() for d in self.destinations[i]])
-        self._channel(rows, self.positions[rows])
+        self._reset_channel(rows)
         self._was_reset[rows] = True
         self._all_reset = bool(self._was_reset.all())
 
@@ -285,66 +319,103 @@ class MissionCore:
         """
         self.check_reset(rows)
         row_indices = self._all_rows[rows]
-        # Robots that arrived before this step are inactive: no motion, no power, no time cost, no outage.
-        active = ~self.arrived[rows]
-        positions, at_goal = self.motion.move_batch(self.positions[rows], action[..., :2], self.destinations[rows], active)
-        self.positions[rows] = positions
-        arriving = at_goal & active
-        gain, gain_db, interference = self._channel(rows, positions)
-        radio = self.scenario.radio
-        power = allocate_rows(action[..., 2], active, self.max_power_w)
-        result = downlink(power, gain, interference, radio.bandwidth_per_robot_hz, self._noise_w_per_hz, self.multiple_access)
-        outage = in_outage(result.rate_bps, radio.qos_rate_bps) & active
-        values = rewards.component_values(active, arriving, outage, self._distances(rows), self._d_max, self.reward_constants)
-        # A weight per row (the phase may differ between missions)
-        reward = rewards.weighted_rows(values, self._weights[:, rows])
-        components = dict(zip(rewards.REWARD_COMPONENTS, values, strict=True))
-        terminated, truncated = _record_step(
+        room, radio, motion = self.scenario.room, self.scenario.radio, self.motion
+        noma = self.multiple_access == "noma"
+        arriving, active, gain, power, sinr, order, bad = _transmission_rows(
+            self.positions,
+            self.destinations,
+            self.arrived,
             row_indices,
+            action,
+            motion.kernel_constants(),
+            self._gain_table,
+            room.resolution,
+            room.nx,
+            room.ny,
+            self._fading(row_indices),
+            self._interferer_power_w,
+            self.max_power_w,
+            self._bandwidth_per_robot_hz,
+            self._noise_w_per_hz,
+            noma,
+        )
+        if bad >= 0:
+            raise motion.position_error(self.positions[rows], bad)
+        gain_db = linear_to_db(gain)
+        self.gain_db[rows] = gain_db
+        result = transmission_result(sinr, order, self._bandwidth_per_robot_hz, noma)
+        outage = in_outage(result.rate_bps, radio.qos_rate_bps) & active
+        constants, mission = self.reward_constants, self.scenario.mission
+        summarise = self.n_robots <= _SEQUENTIAL_SUM_MAX
+        values, reward, terminated, truncated, success, mqi, mission_time, outage_steps = _outcome_rows(
+            row_indices,
+            active,
             arriving,
             outage,
+            self._distances(rows),
+            self._d_max,
+            (
+                float(constants.time_cost),
+                float(constants.outage_penalty),
+                float(constants.arrival_reward),
+                float(constants.success_reward),
+            ),
+            self._weights,
             self.arrived,
             self.step_counts,
             self.arrival_steps,
             self.outage_steps,
             self.max_episode_steps,
+            self.max_steps,
+            mission.t_total,
+            mission.outage_penalty,
+            summarise,
         )
+        if summarise:
+            summary = {"is_success": success, "mqi": mqi, "mission_time": mission_time, "outage_steps": outage_steps}
+        else:
+            summary = self.episode_summaries(rows)
         return MissionStep(
             rows=row_indices,
             reward=reward,
             terminated=terminated,
             truncated=truncated,
-            components=components,
+            components=dict(zip(rewards.REWARD_COMPONENTS, values, strict=True)),
             power_w=power,
             rate_bps=result.rate_bps,
             sinr_db=result.sinr_db,
-            decoding_order=result.decoding_order,
+            decoding_order=order,
             outage=outage,
             gain_db=gain_db,
-            summary=self.episode_summaries(rows),
+            summary=summary,
         )
 
-    def _channel(self, rows: np.ndarray | slice, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The channel of some missions at their positions: the linear AP gain, the same in dB (also kept for the
-        observation) and the interference power, (rows, U) each."""
+    def _reset_channel(self, rows: np.ndarray) -> None:
+        """The channel gains in dB of the missions ``rows`` at their start (for the first observation)."""
         room = self.scenario.room
-        if self.channel == "rayleigh" and len(positions):
-            # One draw per mission from its own generator, in the order of a single env's draws
-            shape = (self.n_robots, self._gain_table.shape[1])
-            fading = np.stack([rayleigh_fading(self.np_randoms[i], shape) for i in self._all_rows[rows]])
-        else:
-            fading = _NO_FADING
-        gain, interference = _link_rows(
-            positions, self._gain_table, room.resolution, room.nx, room.ny, fading, self._interferer_power_w
+        gain, _ = _link_rows(
+            self.positions[rows],
+            self._gain_table,
+            room.resolution,
+            room.nx,
+            room.ny,
+            self._fading(self._all_rows[rows]),
+            self._interferer_power_w,
         )
-        gain_db = linear_to_db(gain)
-        self.gain_db[rows] = gain_db
-        return gain, gain_db, interference
+        self.gain_db[rows] = linear_to_db(gain)
+
+    def _fading(self, rows: np.ndarray) -> np.ndarray:
+        """The Rayleigh channel's fading powers of a step of some missions (rows, U, transmitters): one draw per
+        mission from its own generator, in the order of a single env's draws; none on the radio-map channel."""
+        if self.channel != "rayleigh" or not len(rows):
+            return _NO_FADING
+        shape = (self.n_robots, self._gain_table.shape[1])
+        return np.stack([rayleigh_fading(self.np_randoms[i], shape) for i in rows])
 
     def _distances(self, rows: np.ndarray | slice) -> np.ndarray:
         """Distance of each robot to its destination: Euclidean, or geodesic on the grid (``inducing``)."""
         if self.inducing == "euclidean":
-            return geometry.distance(self.positions[rows], self.destinations[rows])
+            return geometry.distance_rows(self.positions[rows], self.destinations[rows])
         cells = self.scenario.room.flat_cell_index(self.positions[rows])
         return np.take_along_axis(self._distance_maps[rows], cells[..., None], axis=-1)[..., 0]
 
@@ -381,6 +452,125 @@ class MissionCore:
 _NO_FADING = np.zeros((0, 0, 0))
 #: Up to this many robots numpy's ``sum`` adds left to right, as :func:`_summary_rows` does; beyond, pairwise.
 _SEQUENTIAL_SUM_MAX = 7
+
+
+@compiled
+def _transmission_rows(
+    positions: np.ndarray,
+    destinations: np.ndarray,
+    arrived: np.ndarray,
+    rows: np.ndarray,
+    actions: np.ndarray,
+    motion_constants: tuple,
+    gain_table: np.ndarray,
+    resolution: float,
+    nx: int,
+    ny: int,
+    fading: np.ndarray,
+    interferer_power_w: np.ndarray,
+    max_power_w: float,
+    bandwidth_per_robot_hz: float,
+    noise_w_per_hz: float,
+    noma: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """
+    The physics of one step of the missions ``rows`` (checked actions (rows, U, 3)), compiled in one call: the
+    robots still on their way move (:func:`~noma_radiomap.motion.move_robots`, the motion's constants from
+    :meth:`~noma_radiomap.motion.GridMotion.kernel_constants`), their links at the new positions
+    (:func:`_link_rows`), the power allocation (:func:`~noma_radiomap.downlink.allocate_rows`) and the SINRs
+    with the decoding order (:func:`~noma_radiomap.downlink.sinr_rows`). Writes the new positions into
+    ``positions``. Returns the arriving and the active robots, the AP gains, the powers, the SINRs, the decoding
+    order and -1, or, when a robot of ``rows`` is not on a free point, its flat index in (rows, U) as the last
+    value, having changed nothing.
+    """
+    n_rows, n_robots = len(rows), arrived.shape[1]
+    start = np.empty((n_rows, n_robots, 2))
+    goals = np.empty((n_rows, n_robots, 2))
+    motion = np.empty((n_rows, n_robots, 2))
+    power_actions = np.empty((n_rows, n_robots))
+    active = np.empty((n_rows, n_robots), dtype=np.bool_)
+    for k in range(n_rows):
+        i = rows[k]
+        for u in range(n_robots):
+            start[k, u, 0], start[k, u, 1] = positions[i, u, 0], positions[i, u, 1]
+            goals[k, u, 0], goals[k, u, 1] = destinations[i, u, 0], destinations[i, u, 1]
+            motion[k, u, 0], motion[k, u, 1] = actions[k, u, 0], actions[k, u, 1]
+            power_actions[k, u] = actions[k, u, 2]
+            # Robots that arrived before this step are inactive: no motion, no power, no time cost, no outage.
+            active[k, u] = not arrived[i, u]
+    moved, at_goal, bad = move_robots(
+        start.reshape(-1, 2),
+        motion.reshape(-1, 2),
+        goals.reshape(-1, 2),
+        active.reshape(-1),
+        True,
+        *motion_constants,
+    )
+    new = moved.reshape(n_rows, n_robots, 2)
+    arriving = at_goal.reshape(n_rows, n_robots) & active
+    if bad >= 0:
+        empty = np.empty((n_rows, n_robots))
+        return arriving, active, empty, empty, empty, np.empty((n_rows, n_robots), dtype=np.int64), bad
+    for k in range(n_rows):
+        positions[rows[k]] = new[k]
+    gain, interference = _link_rows(new, gain_table, resolution, nx, ny, fading, interferer_power_w)
+    power = allocate_rows(power_actions, active, max_power_w)
+    sinr, order = sinr_rows(power, gain, interference, bandwidth_per_robot_hz, noise_w_per_hz, noma)
+    return arriving, active, gain, power, sinr, order, -1
+
+
+@compiled
+def _outcome_rows(
+    rows: np.ndarray,
+    active: np.ndarray,
+    arriving: np.ndarray,
+    outage: np.ndarray,
+    distance: np.ndarray,
+    d_max: float,
+    reward_constants: tuple[float, float, float, float],
+    weights: np.ndarray,
+    arrived: np.ndarray,
+    step_counts: np.ndarray,
+    arrival_steps: np.ndarray,
+    outage_steps: np.ndarray,
+    max_episode_steps: int,
+    max_steps: int,
+    t_total: float,
+    mqi_outage_penalty: float,
+    summarise: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """
+    The rest of one step of the missions ``rows``, compiled in one call: the reward components
+    (:func:`~noma_radiomap.rewards.component_rows`) and the reward with each mission's phase weights ((5, N)
+    ``weights``; :func:`~noma_radiomap.rewards.weighted_rows`), the bookkeeping in place on the (N, ...) state
+    (:func:`_record_step`) and, when ``summarise``, the episode summaries as of the step (:func:`_summary_rows`;
+    empty arrays otherwise). Returns the components (5, rows), the rewards, terminated, truncated and the summary's
+    all-arrived flags, MQIs, mission times and outage counts.
+    """
+    values = component_rows(active, arriving, outage, distance, d_max, *reward_constants)
+    row_weights = np.empty((weights.shape[0], len(rows)))
+    for k in range(len(rows)):
+        row_weights[:, k] = weights[:, rows[k]]
+    reward = weighted_rows(values, row_weights)
+    terminated, truncated = _record_step(
+        rows, arriving, outage, arrived, step_counts, arrival_steps, outage_steps, max_episode_steps
+    )
+    if not summarise:
+        n_robots = arrived.shape[1]
+        return (
+            values,
+            reward,
+            terminated,
+            truncated,
+            np.empty(0, dtype=np.bool_),
+            np.empty(0),
+            np.empty((0, n_robots), dtype=np.int64),
+            np.empty((0, n_robots), dtype=np.int64),
+        )
+    success, mqi, mission_time, outage_counts = _summary_rows(
+        arrived[rows], arrival_steps[rows], outage_steps[rows], max_steps, t_total, mqi_outage_penalty
+    )
+    return values, reward, terminated, truncated, success, mqi, mission_time, outage_counts
 
 
 @compiled

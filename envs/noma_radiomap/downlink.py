@@ -105,10 +105,10 @@ def sic_sinr(power_w: Any, gain: Any, stronger_power_w: Any, interference_w: Any
     return power_w * gain / (gain * stronger_power_w + interference_w + noise_w)
 
 
+@compiled
 def fdma_sinr(power_w: Any, gain: Any, interference_w: Any, n_robots: int, noise_w_per_robot: Any) -> Any:
     """
-    OMA (FDMA) SINR, ``p_u g_u / (I_u / U + N0 B)`` (see :func:`oma_sinr`). Operators only, so it takes arrays
-    or Python floats alike.
+    OMA (FDMA) SINR, ``p_u g_u / (I_u / U + N0 B)`` (see :func:`oma_sinr`). Compiled, on floats or arrays.
     """
     return power_w * gain / (interference_w / n_robots + noise_w_per_robot)
 
@@ -138,12 +138,12 @@ def noma_sinr(
         shape = np.broadcast_shapes(shape, gain.shape, interference_w.shape)
         power_w, gain, interference_w = (np.broadcast_to(value, shape) for value in (power_w, gain, interference_w))
     rows = (-1, shape[-1])
-    sinr, order = _sic_rows(power_w.reshape(rows), gain.reshape(rows), interference_w.reshape(rows), float(noise_w))
+    sinr, order = sic_rows(power_w.reshape(rows), gain.reshape(rows), interference_w.reshape(rows), float(noise_w))
     return sinr.reshape(shape), order.reshape(shape)
 
 
 @compiled
-def _sic_rows(
+def sic_rows(
     power_w: np.ndarray, gain: np.ndarray, interference_w: np.ndarray, noise_w: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`noma_sinr` of (M, U) robots, compiled: per row the decoding order (:func:`decoding_order`: a
@@ -189,7 +189,12 @@ def shannon_rate(sinr: np.ndarray, bandwidth_hz: float) -> np.ndarray:
     :param bandwidth_hz: bandwidth ``B`` in Hz
     :return: rates in bit/s
     """
-    return bandwidth_hz * np.log2(1.0 + sinr)
+    rate = 1.0 + sinr
+    if not isinstance(rate, np.ndarray) or np.ndim(bandwidth_hz) != 0:
+        return bandwidth_hz * np.log2(rate)
+    np.log2(rate, out=rate)  # in place: the same bits with one array instead of three
+    rate *= bandwidth_hz
+    return rate
 
 
 def sinr_to_db(sinr: np.ndarray) -> np.ndarray:
@@ -220,19 +225,61 @@ def downlink(
     :param multiple_access: ``"noma"`` or ``"oma"``
     :return: a :class:`DownlinkResult` (rate in bit/s, SINR in dB, decoding order)
     """
-    power_w, gain, interference_w = np.asarray(power_w), np.asarray(gain), np.asarray(interference_w)
-    n_robots = power_w.shape[-1]
-    cluster_band_hz = n_robots * bandwidth_per_robot_hz
-    if multiple_access == "noma":
-        sinr, order = noma_sinr(power_w, gain, interference_w, noise_w_per_hz * cluster_band_hz)
-        rate = shannon_rate(sinr, cluster_band_hz)
-    elif multiple_access == "oma":
-        sinr = oma_sinr(power_w, gain, interference_w, noise_w_per_hz * bandwidth_per_robot_hz)
-        order = decoding_order(equivalent_gain(gain, interference_w, noise_w_per_hz * cluster_band_hz))
-        rate = shannon_rate(sinr, bandwidth_per_robot_hz)
-    else:
+    if multiple_access not in MULTIPLE_ACCESS:
         raise ValueError(f"multiple_access must be one of {MULTIPLE_ACCESS}, got {multiple_access!r}")
-    return DownlinkResult(rate_bps=rate, sinr_db=sinr_to_db(sinr), decoding_order=order)
+    arrays = [np.asarray(value, dtype=np.float64) for value in (power_w, gain, interference_w)]
+    shape = np.broadcast_shapes(*(array.shape for array in arrays))
+    power_w, gain, interference_w = (array if array.shape == shape else np.broadcast_to(array, shape) for array in arrays)
+    rows = (-1, shape[-1])
+    noma = multiple_access == "noma"
+    bandwidth_per_robot_hz = float(bandwidth_per_robot_hz)
+    sinr, order = sinr_rows(
+        power_w.reshape(rows),
+        gain.reshape(rows),
+        interference_w.reshape(rows),
+        bandwidth_per_robot_hz,
+        float(noise_w_per_hz),
+        noma,
+    )
+    result = transmission_result(sinr, order, bandwidth_per_robot_hz, noma)
+    return DownlinkResult(*(value.reshape(shape) for value in result))
+
+
+@compiled
+def sinr_rows(
+    power_w: np.ndarray,
+    gain: np.ndarray,
+    interference_w: np.ndarray,
+    bandwidth_per_robot_hz: float,
+    noise_w_per_hz: float,
+    noma: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """
+    The linear SINRs and the decoding order of (M, U) robots, compiled: NOMA with SIC (:func:`sic_rows`) or OMA
+    (:func:`fdma_sinr`); the decoding order is that of the equivalent gains with the cluster-band noise in both
+    modes (:func:`decoding_order`). Float64 arrays of exactly that shape.
+    """
+    n_robots = power_w.shape[1]
+    cluster_noise_w = noise_w_per_hz * (n_robots * bandwidth_per_robot_hz)
+    if noma:
+        return sic_rows(power_w, gain, interference_w, cluster_noise_w)
+    robot_noise_w = noise_w_per_hz * bandwidth_per_robot_hz
+    sinr = np.empty(power_w.shape)
+    order = np.empty(power_w.shape, dtype=np.int64)
+    for row in range(power_w.shape[0]):
+        order[row] = np.argsort(equivalent_gain(gain[row], interference_w[row], cluster_noise_w), kind="mergesort")
+        for u in range(n_robots):
+            sinr[row, u] = fdma_sinr(power_w[row, u], gain[row, u], interference_w[row, u], n_robots, robot_noise_w)
+    return sinr, order
+
+
+def transmission_result(sinr: np.ndarray, order: np.ndarray, bandwidth_per_robot_hz: float, noma: bool) -> DownlinkResult:
+    """
+    The outcome of a transmission from its linear SINRs (..., U): the rates (paper Eq. (12), over the cluster band
+    ``W = U B`` in NOMA and over ``B`` in OMA), the SINRs in dB and the decoding order as given.
+    """
+    band_hz = sinr.shape[-1] * bandwidth_per_robot_hz if noma else bandwidth_per_robot_hz
+    return DownlinkResult(rate_bps=shannon_rate(sinr, band_hz), sinr_db=sinr_to_db(sinr), decoding_order=order)
 
 
 def in_outage(rate_bps: np.ndarray, qos_rate_bps: float) -> np.ndarray:

@@ -218,6 +218,14 @@ def distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @compiled
+def distance_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`distance` of (M, U) points: float64 arrays (M, U, 2) of one shape, compiled (the mission engine's
+    fast path)."""
+    delta = a - b
+    return _norms(delta.reshape(-1, 2)).reshape(delta.shape[:-1])
+
+
+@compiled
 def _norms(delta: np.ndarray) -> np.ndarray:
     """:func:`hypot` of each row of a (M, 2) array."""
     out = np.empty(len(delta))

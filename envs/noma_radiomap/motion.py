@@ -7,6 +7,7 @@ never leaves the room nor stands in a blocked cell.
 """
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -44,7 +45,7 @@ class GridMotion:
     component along it is kept (if both single-axis moves are free, at a corner, the larger one is kept).
     A robot that comes within ``arrival_radius`` of its destination stops there (it has arrived).
 
-    One compiled kernel (:func:`_move_robots`, numba) moves every robot of one mission (:meth:`move`, the
+    One compiled kernel (:func:`move_robots`, numba) moves every robot of one mission (:meth:`move`, the
     single env) or of many (:meth:`move_batch`, the vector env): the sub-step loop of a handful of robots is
     Python-bound in numpy, and the kernel's arithmetic (``+``, ``*``, ``/`` and comparisons, no fused
     multiply-add) gives the bits of the same loop on Python floats. When the bounding box of a whole move
@@ -145,12 +146,21 @@ class GridMotion:
                 f"positions {positions.shape} must be points (..., 2); actions {actions.shape} and destinations "
                 f"{goals.shape} must have their shape, active {active.shape} the shape of their robots {shape}"
             )
-        new, arrived, bad = _move_robots(
+        new, arrived, bad = move_robots(
             positions.reshape(-1, 2),
             actions.reshape(-1, 2),
             goals.reshape(-1, 2),
             active.reshape(-1),
             destinations is not None,
+            *self.kernel_constants(),
+        )
+        if bad >= 0:
+            raise self.position_error(positions, bad)
+        return new.reshape(*shape, 2), arrived.reshape(shape)
+
+    def kernel_constants(self) -> tuple[Any, ...]:
+        """The arguments of :func:`move_robots` after the robots' own: the grid and the motion's constants."""
+        return (
             self.blocked,
             self._blocked_table,
             self.width,
@@ -161,14 +171,16 @@ class GridMotion:
             self.arrival_radius * self.arrival_radius,
             self._fast_path,
         )
-        if bad >= 0:
-            index = [int(i) for i in np.unravel_index(bad, shape)]
-            raise ValueError(f"positions{index}: {positions[tuple(index)].tolist()} is outside the room or in a blocked cell")
-        return new.reshape(*shape, 2), arrived.reshape(shape)
+
+    @staticmethod
+    def position_error(positions: np.ndarray, bad: int) -> ValueError:
+        """The error for robots of which one, the ``bad``-th (flat index), is not on a free point."""
+        index = [int(i) for i in np.unravel_index(bad, positions.shape[:-1])]
+        return ValueError(f"positions{index}: {positions[tuple(index)].tolist()} is outside the room or in a blocked cell")
 
 
 @compiled
-def _move_robots(
+def move_robots(
     positions: np.ndarray,
     actions: np.ndarray,
     goals: np.ndarray,

@@ -101,7 +101,12 @@ def linear_to_db(value: np.ndarray | float, floor: float = _TINY) -> np.ndarray:
     :param floor: the smallest ratio converted (default: the smallest normal float64, -3077 dB)
     :return: ratio(s) in dB
     """
-    return 10.0 * np.log10(np.maximum(value, floor))
+    ratio = np.maximum(value, floor)
+    if not isinstance(ratio, np.ndarray):  # a number
+        return 10.0 * np.log10(ratio)
+    np.log10(ratio, out=ratio)  # in place: the same bits as 10.0 * np.log10(ratio) with one array instead of three
+    ratio *= 10.0
+    return ratio
 
 
 # --------------------------------------------------------------------------------------------------

@@ -119,7 +119,7 @@ def component_values(
     :func:`reward_components` of (M, U) robots (bool arrays and float64 distances of exactly that shape: the
     mission engine's fast path), as the rows of a (5, M) array in the order of :data:`REWARD_COMPONENTS`.
     """
-    return _component_values(
+    return component_rows(
         active,
         arriving,
         outage,
@@ -148,7 +148,7 @@ def weighted_rows(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 @compiled
-def _component_values(
+def component_rows(
     active: np.ndarray,
     arriving: np.ndarray,
     outage: np.ndarray,
