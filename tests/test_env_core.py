@@ -153,3 +153,16 @@ def test_infos_of_a_batch_are_the_info_of_each_mission():
             for key, value in single.items():
                 assert type(batched[key]) is type(value)
                 np.testing.assert_equal(batched[key], value)
+
+
+def test_a_robot_off_the_free_space_raises_before_anything_changes():
+    env = gym.make("NomaRadioMap-v0", scenario="small").unwrapped
+    env.reset(seed=0)
+    core = env.core
+    blocked = np.argwhere(core.radio_map.blocked)[0]
+    core.positions[0, 1] = (blocked + 0.5) * core.scenario.room.resolution
+    state = [array.copy() for array in (core.positions, core.step_counts, core.outage_steps, core.gain_db)]
+    with pytest.raises(ValueError, match=r"positions\[0, 1\]: .* is outside the room or in a blocked cell"):
+        env.step(np.zeros(3 * core.n_robots))
+    for before, after in zip(state, (core.positions, core.step_counts, core.outage_steps, core.gain_db), strict=True):
+        np.testing.assert_array_equal(before, after)
