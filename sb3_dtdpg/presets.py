@@ -27,10 +27,10 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.noise import ActionNoise, NormalActionNoise, OrnsteinUhlenbeckActionNoise
+from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.utils import ConstantSchedule
 
-from sb3_dtdpg.common.noise import noise_settings
+from sb3_dtdpg.common.noise import NormalNoise, OrnsteinUhlenbeckNoise, noise_settings
 from sb3_dtdpg.common.phases import Phase
 from sb3_dtdpg.missions import default_phases, paper_phases
 
@@ -138,7 +138,7 @@ def _noise(noise_type: str, noise_std: float, action_space: spaces.Space | None)
     if not isinstance(action_space, spaces.Box):
         raise ValueError(f"noise_type={noise_type!r} needs a Box action space, got {action_space!r}")
     n_actions = int(np.prod(action_space.shape))
-    noise_class = OrnsteinUhlenbeckActionNoise if noise_type == "ornstein-uhlenbeck" else NormalActionNoise
+    noise_class = OrnsteinUhlenbeckNoise if noise_type == "ornstein-uhlenbeck" else NormalNoise
     return noise_class(np.zeros(n_actions), noise_std * np.ones(n_actions))
 
 

@@ -47,7 +47,7 @@ def test_ddpg_is_the_papers_plain_baseline():
     assert not any(isinstance(m, th.nn.BatchNorm1d) for m in model.policy.modules())
     assert (model.learning_rate, model.batch_size, model.tau, model.buffer_size) == (1e-4, 64, 0.002, 50_000)
     assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
-    np.testing.assert_allclose(model.action_noise._sigma, DDPG_OU_SIGMA)
+    np.testing.assert_allclose(model.action_noise.sigma, DDPG_OU_SIGMA)
 
 
 def test_dtdpg_starts_in_the_destination_phase_and_others_use_the_combined_reward():

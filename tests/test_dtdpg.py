@@ -14,10 +14,11 @@ from stable_baselines3 import DDPG
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.noise import NormalActionNoise, VectorizedActionNoise
+from stable_baselines3.common.noise import VectorizedActionNoise
 
 from sb3_dtdpg import DTDPG, LinearDecayOUNoise, Phase
 from sb3_dtdpg.common.buffers import RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
+from sb3_dtdpg.common.noise import NormalNoise
 from sb3_dtdpg.dtdpg.policies import DTDPGPolicy
 
 TINY = dict(policy_kwargs=dict(net_arch=[32]), learning_starts=50, batch_size=32)
@@ -77,7 +78,7 @@ def test_phases_and_noise_on_a_phased_env():
     assert [(phase.name, phase.reward_phase) for phase in model.phases] == [("train", None)]
     assert noise_sigma_of(model) == 0.5
     # a user's noise is used as is: the default phases do not re-arm it
-    user_noise = NormalActionNoise(np.zeros(3), 0.2 * np.ones(3))
+    user_noise = NormalNoise(np.zeros(3), 0.2 * np.ones(3))  # re-armable: the test sees that it is not re-armed
     model = DTDPG("MlpPolicy", _CurriculumPhasedEnv(v_max=0.02), action_noise=user_noise, phases=None, **TINY)
     assert model.action_noise is user_noise
     assert [phase.sigma for phase in model.phases] == [None, None]

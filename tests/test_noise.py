@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise, VectorizedActionNoise
 
-from sb3_dtdpg.common.noise import LinearDecayOUNoise, noise_sigma, rearm_noise
+from sb3_dtdpg.common.noise import (
+    LinearDecayOUNoise,
+    NormalNoise,
+    OrnsteinUhlenbeckNoise,
+    noise_settings,
+    noise_sigma,
+    rearm_noise,
+)
 
 
 def _expected_sigma(sigma: float, final_sigma: float, decay_episodes: int, k: int) -> float:
@@ -150,17 +157,47 @@ def test_deepcopy_of_a_single_noise_shares_only_the_schedule():
     assert noise.episode == 1
 
 
-def test_rearm_and_sigma_of_constant_sb3_noises():
-    ou = VectorizedActionNoise(OrnsteinUhlenbeckActionNoise(np.zeros(2), 0.3 * np.ones(2)), 2)
+def test_rearm_and_sigma_of_the_constant_noises():
+    ou = VectorizedActionNoise(OrnsteinUhlenbeckNoise(np.zeros(2), 0.3 * np.ones(2)), 2)
+    ou.noises[0]()
+    state = ou.noises[0].noise_prev.copy()
     rearm_noise(ou, 0.2)
     assert noise_sigma(ou) == pytest.approx(0.2)
-    assert all(np.allclose(n._sigma, 0.2) for n in ou.noises)
-    normal = NormalActionNoise(np.zeros(1), np.ones(1))
+    assert all(np.allclose(n.sigma, 0.2) for n in ou.noises)
+    np.testing.assert_array_equal(ou.noises[0].noise_prev, state)  # the process goes on from where it was
+    np.random.seed(0)
+    drawn = ou.noises[0]()
+    np.random.seed(0)
+    reference = OrnsteinUhlenbeckActionNoise(np.zeros(2), 0.2 * np.ones(2))
+    reference.noise_prev = state
+    np.testing.assert_array_equal(drawn, reference())  # SB3's draws at the new scale
+    normal = NormalNoise(np.zeros(1), np.ones(1))
     with pytest.warns(UserWarning, match="final_sigma"):
         rearm_noise(normal, 0.5, final_sigma=0.1)
     assert noise_sigma(normal) == 0.5
+    assert noise_settings(normal) == {
+        "type": "stable_baselines3.common.noise.NormalActionNoise",
+        "mean": [0.0],
+        "sigma": [0.5],
+    }
     assert noise_sigma(None) == 0.0
     rearm_noise(None, 0.5)
+
+
+@pytest.mark.parametrize("noise_class", [NormalActionNoise, OrnsteinUhlenbeckActionNoise])
+def test_sb3s_own_noises_are_left_as_they_are_with_the_noise_to_use(noise_class):
+    noise = noise_class(np.zeros(2), 0.3 * np.ones(2))
+    public = {NormalActionNoise: "NormalNoise", OrnsteinUhlenbeckActionNoise: "OrnsteinUhlenbeckNoise"}[noise_class]
+    np.random.seed(0)
+    before = noise()
+    with pytest.warns(UserWarning, match=f"not re-armed to sigma=0.1; pass sb3_dtdpg.common.noise.{public}"):
+        rearm_noise(noise, 0.1)
+    noise.reset()
+    np.random.seed(0)
+    np.testing.assert_array_equal(noise(), before)  # the same scale as before
+    assert np.isnan(noise_sigma(noise))
+    with pytest.raises(TypeError, match=f"keeps them private: use sb3_dtdpg.common.noise.{public}"):
+        noise_settings(noise)
 
 
 @pytest.mark.parametrize(

@@ -38,7 +38,7 @@ TODAYS_MISSION_DEFAULTS = {
 
 def _sigma(noise):
     noise = noise.base_noise if isinstance(noise, VectorizedActionNoise) else noise
-    return noise.initial_sigma if isinstance(noise, LinearDecayOUNoise) else noise._sigma
+    return noise.initial_sigma if isinstance(noise, LinearDecayOUNoise) else noise.sigma
 
 
 def _json_types(value, key="") -> None:

@@ -233,6 +233,74 @@ class LinearDecayOUNoise(ActionNoise):
         )
 
 
+class NormalNoise(NormalActionNoise):
+    """
+    SB3's ``NormalActionNoise`` (the same draws) whose settings are public attributes, so that a run's identity can
+    record them and a curriculum can re-arm its scale (:meth:`rearm`); SB3's own noises keep their settings
+    private. The baselines' Gaussian noise (:func:`sb3_dtdpg.presets.model_kwargs`).
+
+    :param mean: Mean of the noise (its shape is the action shape)
+    :param sigma: Scale (standard deviation) of the noise
+    :param dtype: Type of the output noise
+    """
+
+    def __init__(self, mean: np.ndarray, sigma: np.ndarray, dtype: DTypeLike = np.float32) -> None:
+        self.mean, self.sigma, self.dtype = mean, sigma, dtype
+        super().__init__(mean, sigma, dtype)
+
+    def rearm(self, sigma: float | np.ndarray) -> None:
+        """
+        Set a new scale, through the public constructor of SB3's noise.
+
+        :param sigma: the new scale (a number or one value per action dimension)
+        """
+        self.sigma = _as_sigma("sigma", sigma, np.shape(self.mean))
+        super().__init__(self.mean, self.sigma, self.dtype)
+
+
+class OrnsteinUhlenbeckNoise(OrnsteinUhlenbeckActionNoise):
+    """
+    SB3's ``OrnsteinUhlenbeckActionNoise`` (the same draws) whose settings are public attributes, so that a run's
+    identity can record them and a curriculum can re-arm its scale (:meth:`rearm`); SB3's own noises keep their
+    settings private. The constant-scale OU noise of the DDPG baseline (:func:`sb3_dtdpg.presets.model_kwargs`).
+
+    :param mean: Mean of the noise (its shape is the action shape)
+    :param sigma: Scale of the noise
+    :param theta: Rate of mean reversion
+    :param dt: Timestep for the noise
+    :param initial_noise: Initial value for the noise output (if None: 0)
+    :param dtype: Type of the output noise
+    """
+
+    def __init__(
+        self,
+        mean: np.ndarray,
+        sigma: np.ndarray,
+        theta: float = 0.15,
+        dt: float = 1e-2,
+        initial_noise: np.ndarray | None = None,
+        dtype: DTypeLike = np.float32,
+    ) -> None:
+        self.mean, self.sigma, self.theta, self.dt, self.dtype = mean, sigma, theta, dt, dtype
+        super().__init__(mean, sigma, theta, dt, initial_noise, dtype)
+
+    def rearm(self, sigma: float | np.ndarray) -> None:
+        """
+        Set a new scale, through the public constructor of SB3's noise; the process goes on from its current state.
+
+        :param sigma: the new scale (a number or one value per action dimension)
+        """
+        state = self.noise_prev
+        self.sigma = _as_sigma("sigma", sigma, np.shape(self.mean))
+        super().__init__(self.mean, self.sigma, self.theta, self.dt, self.initial_noise, self.dtype)
+        self.noise_prev = state
+
+
+#: The noises whose scale can be re-armed with a constant scale, and the SB3 noise whose draws each one makes
+#: (what a run's identity records as its type).
+_CONSTANT_NOISES: dict[type, type] = {NormalNoise: NormalActionNoise, OrnsteinUhlenbeckNoise: OrnsteinUhlenbeckActionNoise}
+
+
 def decaying_noise(
     action_shape: tuple[int, ...],
     sigma: float | np.ndarray,
@@ -270,9 +338,11 @@ def rearm_noise(
     """
     Re-arm the exploration noise of a model with a new initial scale (at a curriculum transfer).
 
-    Works on a :class:`LinearDecayOUNoise`, on SB3's ``VectorizedActionNoise`` wrapping one, and on SB3's
-    constant-scale ``NormalActionNoise`` / ``OrnsteinUhlenbeckActionNoise`` (their scale is set to ``sigma``;
-    a decay cannot be applied to them and is ignored with a warning). ``None`` (no noise) is left alone.
+    Works on a :class:`LinearDecayOUNoise`, on SB3's ``VectorizedActionNoise`` wrapping one, and on the
+    constant-scale :class:`NormalNoise` / :class:`OrnsteinUhlenbeckNoise` (their scale is set to ``sigma``; a decay
+    cannot be applied to them and is ignored with a warning). SB3's own ``NormalActionNoise`` /
+    ``OrnsteinUhlenbeckActionNoise`` keep their scale private: they are left as they are, with a warning that names
+    the noise to use instead. ``None`` (no noise) is left alone.
 
     :param action_noise: The noise to re-arm (``model.action_noise``)
     :param sigma: New initial scale
@@ -284,21 +354,32 @@ def rearm_noise(
     for noise in _noises(action_noise):
         if isinstance(noise, LinearDecayOUNoise):
             noise.rearm(sigma, final_sigma, decay_episodes)
-        elif hasattr(noise, "_sigma") and hasattr(noise, "_mu"):
-            noise._sigma = _as_sigma("sigma", sigma, np.shape(noise._mu))
+        elif isinstance(noise, tuple(_CONSTANT_NOISES)):
+            noise.rearm(sigma)
             if final_sigma is not None and not np.allclose(final_sigma, sigma):
                 warnings.warn(f"{type(noise).__name__} has a constant scale: final_sigma={final_sigma!r} is ignored")
+        elif isinstance(noise, tuple(_CONSTANT_NOISES.values())):
+            warnings.warn(
+                f"{type(noise).__name__} keeps its scale private: it is not re-armed to sigma={sigma!r}; pass "
+                f"sb3_dtdpg.common.noise.{_public_noise_name(noise)} (the same noise) to re-arm it"
+            )
         else:
             raise TypeError(f"Cannot re-arm action noise of type {type(noise).__name__}")
+
+
+def _public_noise_name(noise: ActionNoise) -> str:
+    return next(public.__name__ for public, sb3 in _CONSTANT_NOISES.items() if isinstance(noise, sb3))
 
 
 def noise_sigma(action_noise: ActionNoise | None) -> float:
     """
     The current scale of a model's exploration noise, averaged over action dimensions (for logging).
 
-    :param action_noise: ``model.action_noise``: a :class:`LinearDecayOUNoise`, SB3's ``VectorizedActionNoise``
-        wrapping one, or SB3's ``NormalActionNoise`` / ``OrnsteinUhlenbeckActionNoise``; None counts as 0
+    :param action_noise: ``model.action_noise``: a :class:`LinearDecayOUNoise`, :class:`NormalNoise` or
+        :class:`OrnsteinUhlenbeckNoise`, SB3's ``VectorizedActionNoise`` wrapping one, or None (counts as 0); SB3's
+        own noises, which keep their scale private, give NaN
     :return: The mean of the current sigma
+    :raises TypeError: for another noise class
     """
     if action_noise is None:
         return 0.0
@@ -306,28 +387,31 @@ def noise_sigma(action_noise: ActionNoise | None) -> float:
         action_noise = action_noise.base_noise
     if isinstance(action_noise, LinearDecayOUNoise):
         return float(np.mean(action_noise.current_sigma))
-    if not hasattr(action_noise, "_sigma"):  # SB3's noises keep their scale there (no public accessor)
-        raise TypeError(f"Cannot read the scale of action noise of type {type(action_noise).__name__}")
-    return float(np.mean(action_noise._sigma))
+    if isinstance(action_noise, tuple(_CONSTANT_NOISES)):
+        return float(np.mean(action_noise.sigma))
+    if isinstance(action_noise, tuple(_CONSTANT_NOISES.values())):
+        return float("nan")
+    raise TypeError(f"Cannot read the scale of action noise of type {type(action_noise).__name__}")
 
 
 def noise_settings(action_noise: ActionNoise | None) -> dict[str, Any] | None:
     """
     The settings of an exploration noise as plain data (a run's identity; :func:`sb3_dtdpg.presets.model_settings`).
 
-    :param action_noise: ``model.action_noise``: a :class:`LinearDecayOUNoise`, SB3's ``VectorizedActionNoise``,
-        ``NormalActionNoise`` or ``OrnsteinUhlenbeckActionNoise`` (their constructor arguments, which SB3 keeps in
-        ``_mu``, ``_sigma``, ``_theta`` and ``_dt`` without public accessors), or None
+    :param action_noise: ``model.action_noise``: a :class:`LinearDecayOUNoise`, :class:`NormalNoise` or
+        :class:`OrnsteinUhlenbeckNoise` (recorded as the SB3 noise whose draws it makes), SB3's
+        ``VectorizedActionNoise`` wrapping one, or None
     :return: ``{"type": "module.Class", ...}`` with lists for arrays and ``n_envs`` for a vectorized noise; None
-    :raises TypeError: for another noise class
+    :raises TypeError: for another noise class, SB3's own noises included (they keep their settings private: use
+        :class:`NormalNoise` / :class:`OrnsteinUhlenbeckNoise`, the same noises)
     """
     if action_noise is None:
         return None
     if isinstance(action_noise, VectorizedActionNoise):
         return {**(noise_settings(action_noise.base_noise) or {}), "n_envs": int(action_noise.n_envs)}
-    values: dict[str, Any] = {"type": f"{type(action_noise).__module__}.{type(action_noise).__qualname__}"}
     if isinstance(action_noise, LinearDecayOUNoise):
-        values.update(
+        kind: type = type(action_noise)
+        values: dict[str, Any] = dict(
             mean=action_noise.mean,
             sigma=action_noise.initial_sigma,
             final_sigma=action_noise.final_sigma,
@@ -335,13 +419,22 @@ def noise_settings(action_noise: ActionNoise | None) -> dict[str, Any] | None:
             theta=action_noise.theta,
             dt=action_noise.dt,
         )
-    elif isinstance(action_noise, (NormalActionNoise, OrnsteinUhlenbeckActionNoise)):
-        values.update(mean=action_noise._mu, sigma=action_noise._sigma)
-        if isinstance(action_noise, OrnsteinUhlenbeckActionNoise):
-            values.update(theta=action_noise._theta, dt=action_noise._dt)
+    elif isinstance(action_noise, tuple(_CONSTANT_NOISES)):
+        kind = next(sb3 for public, sb3 in _CONSTANT_NOISES.items() if isinstance(action_noise, public))
+        values = dict(mean=action_noise.mean, sigma=action_noise.sigma)
+        if isinstance(action_noise, OrnsteinUhlenbeckNoise):
+            values.update(theta=action_noise.theta, dt=action_noise.dt)
+    elif isinstance(action_noise, tuple(_CONSTANT_NOISES.values())):
+        raise TypeError(
+            f"Cannot read the settings of SB3's {type(action_noise).__name__}, which keeps them private: use "
+            f"sb3_dtdpg.common.noise.{_public_noise_name(action_noise)}, the same noise with public settings"
+        )
     else:
         raise TypeError(f"Cannot describe action noise of type {type(action_noise).__name__}")
     return {
-        key: np.asarray(value, dtype=np.float64).tolist() if isinstance(value, np.ndarray) else value
-        for key, value in values.items()
+        "type": f"{kind.__module__}.{kind.__qualname__}",
+        **{
+            key: np.asarray(value, dtype=np.float64).tolist() if isinstance(value, np.ndarray) else value
+            for key, value in values.items()
+        },
     }
