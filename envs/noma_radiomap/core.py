@@ -89,24 +89,31 @@ class MissionStep:
         them). Both are written as dict displays, the fastest way CPython has to build them: for 16 missions the
         infos cost as much as the step's physics.
         """
-        names = tuple(self.components)
+        # The five reward components as one dict display per mission too (twice as fast as dict(zip(...)))
+        time_key, inducing_key, qos_key, arrival_key, success_key = self.components
         columns = zip(*(value.tolist() for value in self.components.values()), strict=True)
         summary = self.summary
         return [
             {
-                "reward_components": dict(zip(names, components, strict=True)),
+                "reward_components": {
+                    time_key: c[0],
+                    inducing_key: c[1],
+                    qos_key: c[2],
+                    arrival_key: c[3],
+                    success_key: c[4],
+                },
                 "rate_bps": rate,
                 "sinr_db": sinr,
                 "outage": outage,
                 "power_w": power,
                 "gain_db": gain,
                 "decoding_order": order,
-                "is_success": success,
+                "is_success": is_success,
                 "mqi": mqi,
                 "mission_time": mission_time,
                 "outage_steps": outage_steps,
             }
-            for components, rate, sinr, outage, power, gain, order, success, mqi, mission_time, outage_steps in zip(
+            for c, rate, sinr, outage, power, gain, order, is_success, mqi, mission_time, outage_steps in zip(
                 columns,
                 self.rate_bps,
                 self.sinr_db,
