@@ -41,7 +41,7 @@ _ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
 _PRESETS = ("paper", "tuned")
 _OBSERVATIONS = ("goal", "destinations", "paper")
 _DEFAULT_ENV_ID = "NomaRadioMap-v0"
-_EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task")
+_EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
 _PRESET_HELP = (
     "hyperparameter set. tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; "
     "the default); paper: Table I (the default of td3, sac and tqc, which have no tuned set)"

@@ -89,8 +89,9 @@ def _fake_result(spec, mqi):
 def test_reproduce_skips_finished_runs(tmp_path):
     experiments = reproduce_specs(MICRO, seeds=1)
     unique = list({s.run_id: s for specs in experiments.values() for s in specs}.values())
-    # Table II (2 modes x 3 trainings), DDPG (2 modes), the second learning rate (2 modes), the paper task (8)
-    assert len(unique) == 18
+    # Table II (2 modes x 3 trainings), DDPG (2 modes), the second learning rate (2 modes), the paper task (8), in
+    # "reality" (8)
+    assert len(unique) == 26
     missing = next(s for s in unique if s.algo == "ddpg" and s.multiple_access == "oma")
     finished = {}
     for spec in unique:
@@ -130,12 +131,15 @@ def test_reproduce_skips_finished_runs(tmp_path):
 
 def test_reproduce_with_tuned_hyperparameters_compares_the_paper_learning_rate():
     experiments = reproduce_specs(MICRO, seeds=1, hyperparams="tuned")
-    experiments.pop("paper_task")  # both presets on the paper's task, whatever the set (tests/test_paper_task_experiment.py)
+    for name in ("paper_task", "paper_task_reality"):  # both presets on the paper's task, whatever the set
+        experiments.pop(name)  # (tests/test_paper_task_experiment.py)
     specs = [s for specs in experiments.values() for s in specs]
     assert {s.hyperparams for s in specs} == {"tuned"} and all(s.run_id.endswith("_tuned_goal") for s in specs)
     assert {s.learning_rate for s in experiments["learning_rates"]} == {None, 1e-4}  # the set's own 1e-3, and 1e-4
     assert {s.learning_rate for s in reproduce_specs(MICRO, seeds=1)["learning_rates"]} == {None, 1e-3}
-    paper_ids = {s.run_id for name, specs in reproduce_specs(MICRO, seeds=1).items() if name != "paper_task" for s in specs}
+    paper_ids = {
+        s.run_id for name, specs in reproduce_specs(MICRO, seeds=1).items() if not name.startswith("paper_task") for s in specs
+    }
     assert paper_ids.isdisjoint(s.run_id for s in specs)  # one output folder can hold both sets
 
 

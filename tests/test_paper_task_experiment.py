@@ -53,6 +53,13 @@ def test_the_runs_are_the_paper_task_with_both_presets_and_their_own_ids():
     env = gym.make(specs[0].env_id, **specs[0].env_kwargs)
     assert env.observation_space.shape == (3 * 2,)  # Eq. (24): position and gain per robot, nothing else
     assert env.unwrapped.scenario.mission.max_steps == 1000
+    # "reality" training: the same runs with Rayleigh fading for Table II's longer budget, under ids of their own
+    reality = experiments["paper_task_reality"]
+    assert [dataclasses.replace(s, channel="radio_map", episodes=MICRO.episodes, tag="") for s in reality] == [
+        dataclasses.replace(s, tag="") for s in specs
+    ]
+    assert {(s.channel, s.episodes) for s in reality} == {("rayleigh", MICRO.long_episodes)}
+    assert {s.run_id for s in reality}.isdisjoint(others - {s.run_id for s in reality})
 
 
 def test_training_success_is_read_per_episode_from_the_run_log(tmp_path):
@@ -85,6 +92,11 @@ def test_the_table_checks_the_paper_claim_and_pairs_by_seed(tmp_path):
     assert paired["train_success_last"] == paired["train_success_first"] == pytest.approx((0.5 + 0.7) / 2 - 0.1)  # 10 < 100
     for name in ("paper_task.md", "paper_task_runs.csv", "fig_paper_task_success.png"):
         assert (tmp_path / name).stat().st_size > 0
+    # the same runs as if trained with Rayleigh fading: tables of their own, which say so
+    paper_task.paper_task_tables(tmp_path, MICRO, specs, results, progress=False, channel="rayleigh")
+    assert "with Rayleigh fading" in (tmp_path / "paper_task_reality.md").read_text().splitlines()[0]
+    assert pd.read_csv(tmp_path / "paper_task_reality_runs.csv").equals(pd.read_csv(tmp_path / "paper_task_runs.csv"))
+    assert (tmp_path / "fig_paper_task_reality_success.png").stat().st_size > 0
 
 
 def test_reproduce_trains_only_the_chosen_modes(tmp_path):

@@ -41,12 +41,14 @@ def compare_specs(
     episodes: int | None = None,
     tag: str = "",
     eval_before_transfer: bool = False,
+    channel: str = "radio_map",
 ) -> list[RunSpec]:
     """
     :param episodes: training episodes per run (None: the budget's)
     :param tag: run-id suffix of these runs (:attr:`RunSpec.tag`)
     :param eval_before_transfer: also evaluate DT-DPG's network from the end of its first phase
-    :return: the runs of a comparison (every algorithm x mode x seed, trained on the radio map)
+    :param channel: the training channel (:attr:`RunSpec.channel`)
+    :return: the runs of a comparison (every algorithm x mode x seed)
     """
     return [
         RunSpec(
@@ -61,6 +63,7 @@ def compare_specs(
             eval_before_transfer=eval_before_transfer,
             hyperparams=hyperparams,
             observation=observation,
+            channel=channel,
         )
         for algo in algos
         for mode in modes

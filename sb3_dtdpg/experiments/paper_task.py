@@ -30,6 +30,7 @@ __all__ = [
     "merge_runs",
     "paper_task_specs",
     "paper_task_tables",
+    "table_name",
     "training_success",
     "write_tables",
 ]
@@ -45,16 +46,21 @@ PAPER_CLAIM = {"DDPG": ("<", 0.20), "DT-DPG": (">", 0.95)}
 _METRICS = ("train_success", "train_success_first", "train_success_last", "success_rate", "mqi")
 
 
-def paper_task_specs(budget: Budget, seeds: int, modes: Sequence[str] = ("noma", "oma")) -> list[RunSpec]:
+def paper_task_specs(
+    budget: Budget, seeds: int, modes: Sequence[str] = ("noma", "oma"), channel: str = "radio_map"
+) -> list[RunSpec]:
     """
     :param budget: the experiment's scale (:attr:`~sb3_dtdpg.experiments.budgets.Budget.task_episodes` training
-        episodes per run)
+        episodes per run on the radio map; :attr:`~sb3_dtdpg.experiments.budgets.Budget.long_episodes`, Table II's
+        700, with ``channel="rayleigh"``)
     :param seeds: seeds per configuration
     :param modes: the downlink modes
+    :param channel: the training channel: ``"radio_map"`` (the paper's method) or ``"rayleigh"`` ("reality")
     :return: DT-DPG and DDPG runs on the paper's task, per preset, mode and seed (seed-major order is left to
         the caller)
     """
-    episodes = budget.task_episodes
+    reality = channel == "rayleigh"
+    episodes = budget.long_episodes if reality else budget.task_episodes
     return [
         spec
         for preset in PRESETS
@@ -66,8 +72,9 @@ def paper_task_specs(budget: Budget, seeds: int, modes: Sequence[str] = ("noma",
             hyperparams=preset,
             observation="paper",
             episodes=episodes,
-            tag=f"paper_task_{episodes}",
+            tag=f"paper_task_{'reality_' if reality else ''}{episodes}",
             eval_before_transfer=True,
+            channel=channel,
         )
     ]
 
@@ -187,15 +194,18 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
     return "\n".join(lines)
 
 
-def write_tables(out: Path, budget: Budget, records: pd.DataFrame, progress: bool = True) -> pd.DataFrame:
+def write_tables(
+    out: Path, budget: Budget, records: pd.DataFrame, progress: bool = True, channel: str = "radio_map"
+) -> pd.DataFrame:
     """
-    Write ``paper_task.md``, ``paper_task.csv``, ``paper_task_runs.csv`` and ``paper_task_paired.csv`` (see
-    :func:`paper_task_tables`) from per-run records.
+    Write ``<name>.md``, ``<name>.csv``, ``<name>_runs.csv`` and ``<name>_paired.csv`` (see
+    :func:`paper_task_tables`; ``<name>`` is :func:`table_name` of the training channel) from per-run records.
 
     :param out: output folder
     :param budget: the runs' budget (for the planners' rows and the title)
     :param records: one row per run, the columns of ``paper_task_runs.csv``
     :param progress: print the Markdown table
+    :param channel: the runs' training channel
     :return: the summary, with the reference planners' rows
     """
     summary = _with_planners(_summary(records), budget)
@@ -203,17 +213,30 @@ def write_tables(out: Path, budget: Budget, records: pd.DataFrame, progress: boo
         records, "algorithm", "DT-DPG", "DDPG", by=("preset", "multiple_access"), metrics=_METRICS
     )
     title = (
-        f"The paper's task: DDPG vs DT-DPG ({budget.name} budget: {budget.task_episodes} training episodes, "
-        f"{budget.scenario or 'mall'}, radio-map training, {budget.eval_episodes} Rayleigh test missions)"
+        f"The paper's task: DDPG vs DT-DPG ({budget.name} budget: {_training(budget, channel)}, "
+        f"{budget.scenario or 'mall'}, {budget.eval_episodes} Rayleigh test missions)"
     )
     text = _markdown(summary, paired, title)
-    (out / "paper_task.md").write_text(text)
-    summary.to_csv(out / "paper_task.csv", index=False)
-    records.to_csv(out / "paper_task_runs.csv", index=False)
-    paired.to_csv(out / "paper_task_paired.csv", index=False)
+    name = table_name(channel)
+    (out / f"{name}.md").write_text(text)
+    summary.to_csv(out / f"{name}.csv", index=False)
+    records.to_csv(out / f"{name}_runs.csv", index=False)
+    paired.to_csv(out / f"{name}_paired.csv", index=False)
     if progress:
         print(text)
     return summary
+
+
+def table_name(channel: str = "radio_map") -> str:
+    """The file name (no suffix) of the experiment's tables for runs trained on ``channel``: ``paper_task`` (radio
+    map) or ``paper_task_reality``."""
+    return "paper_task" if channel == "radio_map" else "paper_task_reality"
+
+
+def _training(budget: Budget, channel: str) -> str:
+    if channel == "radio_map":
+        return f"{budget.task_episodes} training episodes on the radio map"
+    return f'{budget.long_episodes} training episodes with Rayleigh fading ("reality")'
 
 
 def merge_runs(run_tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
@@ -239,19 +262,26 @@ def merge_runs(run_tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
 
 
 def paper_task_tables(
-    out: Path, budget: Budget, specs: Sequence[RunSpec], results: dict[str, Any], progress: bool = True
+    out: Path,
+    budget: Budget,
+    specs: Sequence[RunSpec],
+    results: dict[str, Any],
+    progress: bool = True,
+    channel: str = "radio_map",
 ) -> pd.DataFrame | None:
     """
     Write ``paper_task.md`` / ``paper_task.csv`` (per preset, algorithm and mode), ``paper_task_runs.csv`` (per run),
     ``paper_task_paired.csv`` (DT-DPG - DDPG by seed) and ``fig_paper_task_success.png`` (the training success
-    rate per episode, a rolling mean over 20 episodes) from the finished runs of :func:`paper_task_specs`.
+    rate per episode, a rolling mean over 20 episodes) from the finished runs of :func:`paper_task_specs`; for the
+    runs trained with Rayleigh fading (``channel="rayleigh"``) the same as ``paper_task_reality*``.
 
+    :param channel: the training channel of ``specs``
     :return: the summary (with the reference planners' rows), or None when no run has finished
     """
     records = _records(out, specs, results)
     if records.empty:
         return None
-    summary = write_tables(out, budget, records, progress)
+    summary = write_tables(out, budget, records, progress, channel)
     groups: dict[str, list[Path]] = {}
     for spec in specs:
         if results.get(spec.run_id) is not None:
@@ -259,10 +289,10 @@ def paper_task_tables(
             groups.setdefault(label, []).append(out / "tb" / spec.run_id)
     plots.plot_learning_curves(
         groups,
-        out / "fig_paper_task_success.png",
+        out / f"fig_{table_name(channel)}_success.png",
         tags=((plots.SUCCESS_TAG, "training episodes reaching the destination"),),
         smooth=20,
-        title=f"The paper's task: training success per episode\n({budget.scenario or 'mall'}, {budget.name} budget; "
-        "dotted: DT-DPG's transfer)",
+        title=f"The paper's task: training success per episode\n({budget.scenario or 'mall'}, {budget.name} budget, "
+        f"{'radio-map' if channel == 'radio_map' else 'Rayleigh'} training; dotted: DT-DPG's transfer)",
     )
     return summary

@@ -7,8 +7,9 @@ Runs (per seed; ``E`` and ``L`` are the budget's ``episodes`` and ``long_episode
 - DDPG vs DT-DPG: plain DDPG in NOMA and OMA, radio map, ``E`` episodes (success rate and MQI);
 - the two learning rates (paper Fig. 6): DT-DPG at 1e-3 and 1e-4 (one is the hyperparameter set's own), NOMA and OMA;
 - the paper's task (:mod:`sb3_dtdpg.experiments.paper_task`): DDPG vs DT-DPG on ``NomaRadioMapPaper-v0`` with
-  Table I and with the tuned set, NOMA and OMA, ``E`` episodes (the share of training episodes that reach the
-  destination, the paper's central claim).
+  Table I and with the tuned set, NOMA and OMA, ``E`` episodes on the radio map (the share of training episodes
+  that reach the destination, the paper's central claim), and the same trained in "reality" for ``L`` episodes
+  (``paper_task_reality``).
 
 The first three use one hyperparameter set (``hyperparams``) and observation: ``"paper"`` (Table I) or ``"tuned"``
 (the best measured DT-DPG settings, given to DDPG as well; see :mod:`sb3_dtdpg.presets`).
@@ -46,7 +47,7 @@ PAPER_TABLE_II: dict[tuple[str, str, str], float] = {
     ("NOMA", "reality", "L"): 929.0,
 }
 #: The experiments of :func:`reproduce_specs`, by name.
-EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task")
+EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
 #: The paper's two learning rates (Fig. 6).
 LEARNING_RATES = (1e-4, 1e-3)
 
@@ -108,7 +109,23 @@ def reproduce_specs(
         "table_ii": table,
         "learning_rates": dtdpg + lrs,
         "paper_task": paper_task_specs(budget, seeds, modes),
+        "paper_task_reality": paper_task_specs(budget, seeds, modes, channel="rayleigh"),
     }
+
+
+#: The paper-task experiments and their training channels.
+_PAPER_TASK_CHANNELS = {"paper_task": "radio_map", "paper_task_reality": "rayleigh"}
+
+
+def _paper_task_tables(
+    out: Path, budget: Budget, experiments: dict[str, list[RunSpec]], results: dict[str, Any], progress: bool
+) -> dict[str, pd.DataFrame]:
+    """The tables of the paper-task experiments that have finished runs (:func:`paper_task_tables`)."""
+    summaries = {
+        name: paper_task_tables(out, budget, experiments[name], results, progress, channel)
+        for name, channel in _PAPER_TASK_CHANNELS.items()
+    }
+    return {name: summary for name, summary in summaries.items() if summary is not None}
 
 
 def _approach(spec: dict[str, Any], budget: Budget) -> tuple[str, str]:
@@ -340,9 +357,9 @@ def run_reproduce(
             out_tables["learning_rates"] = summary
             if progress:
                 tables.print_table(summary, "Learning rates (DT-DPG)", columns=("multiple_access", "learning_rate"))
-        if (summary := paper_task_tables(out, budget, experiments["paper_task"], results, progress)) is not None:
-            out_tables["paper_task"] = summary
-        task_runs = {spec.run_id for spec in experiments["paper_task"]}  # paired in their own table
+        out_tables.update(_paper_task_tables(out, budget, experiments, results, progress))
+        # paired in their own tables
+        task_runs = {spec.run_id for name in _PAPER_TASK_CHANNELS for spec in experiments[name]}
         paired = _paired_table(
             out,
             budget,
