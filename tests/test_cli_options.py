@@ -9,7 +9,7 @@ import gymnasium as gym
 import pytest
 
 from sb3_dtdpg.cli import build_parser, main
-from sb3_dtdpg.experiments.reproduce import reproduce_specs
+from sb3_dtdpg.experiments.reproduce import DEFAULT_EXPERIMENTS, reproduce_specs
 from sb3_dtdpg.experiments.runs import BUDGETS
 
 
@@ -100,7 +100,8 @@ def test_out_is_a_folder_everywhere():
 
 def test_reproduce_defaults_to_a_budget_of_minutes():
     budget = BUDGETS[build_parser().parse_args(["reproduce"]).budget]
-    specs = {s.run_id: s for specs in reproduce_specs(budget, budget.seeds).values() for s in specs}
+    experiments = reproduce_specs(budget, budget.seeds)
+    specs = {s.run_id: s for name in DEFAULT_EXPERIMENTS for s in experiments[name]}
     # `small`: at most 60 steps an episode; the paper's task: 1000
     steps = sum(spec.episodes * (1000 if spec.env_id == "NomaRadioMapPaper-v0" else 60) for spec in specs.values())
     assert budget.scenario == "small" and steps <= 100_000, "at a few hundred steps/s per core, minutes"

@@ -58,7 +58,7 @@ def test_the_runs_are_the_paper_task_with_both_presets_and_their_own_ids():
     assert [dataclasses.replace(s, channel="radio_map", episodes=MICRO.episodes, tag="") for s in reality] == [
         dataclasses.replace(s, tag="") for s in specs
     ]
-    assert {(s.channel, s.episodes) for s in reality} == {("rayleigh", MICRO.long_episodes)}
+    assert {(s.channel, s.episodes) for s in reality} == {("rayleigh", MICRO.task_long_episodes)}
     assert {s.run_id for s in reality}.isdisjoint(others - {s.run_id for s in reality})
 
 

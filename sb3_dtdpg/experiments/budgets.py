@@ -39,6 +39,12 @@ class Budget:
         """Training episodes of the paper-task runs."""
         return self.episodes if self.paper_task_episodes is None else self.paper_task_episodes
 
+    @property
+    def task_long_episodes(self) -> int:
+        """Training episodes of the paper-task runs trained in "reality": :attr:`task_episodes` made longer as
+        ``long_episodes`` is longer than ``episodes`` (the paper: 700)."""
+        return round(self.task_episodes * self.long_episodes / self.episodes)
+
 
 #: ``tiny`` runs the whole pipeline on the ``small`` scenario in minutes (too short to learn: a check that it runs; its
 #: paper-task runs train 3 episodes, since those last up to 1000 steps);

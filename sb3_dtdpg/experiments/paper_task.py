@@ -51,8 +51,8 @@ def paper_task_specs(
 ) -> list[RunSpec]:
     """
     :param budget: the experiment's scale (:attr:`~sb3_dtdpg.experiments.budgets.Budget.task_episodes` training
-        episodes per run on the radio map; :attr:`~sb3_dtdpg.experiments.budgets.Budget.long_episodes`, Table II's
-        700, with ``channel="rayleigh"``)
+        episodes per run on the radio map; :attr:`~sb3_dtdpg.experiments.budgets.Budget.task_long_episodes`,
+        Table II's 700 at the paper's scale, with ``channel="rayleigh"``)
     :param seeds: seeds per configuration
     :param modes: the downlink modes
     :param channel: the training channel: ``"radio_map"`` (the paper's method) or ``"rayleigh"`` ("reality")
@@ -60,7 +60,7 @@ def paper_task_specs(
         the caller)
     """
     reality = channel == "rayleigh"
-    episodes = budget.long_episodes if reality else budget.task_episodes
+    episodes = budget.task_long_episodes if reality else budget.task_episodes
     return [
         spec
         for preset in PRESETS
@@ -236,7 +236,7 @@ def table_name(channel: str = "radio_map") -> str:
 def _training(budget: Budget, channel: str) -> str:
     if channel == "radio_map":
         return f"{budget.task_episodes} training episodes on the radio map"
-    return f'{budget.long_episodes} training episodes with Rayleigh fading ("reality")'
+    return f'{budget.task_long_episodes} training episodes with Rayleigh fading ("reality")'
 
 
 def merge_runs(run_tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
