@@ -9,6 +9,7 @@ on each mission (``set_reward_phase``, ``reward_weights``, ...). :func:`make_mis
 ``is_success`` for the logger), as ``make_vec_env`` adds a ``Monitor`` to each env.
 """
 
+import copy
 from collections.abc import Sequence
 from typing import Any
 
@@ -19,7 +20,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvO
 
 import noma_radiomap  # noqa: F401  (registers the ids)
 from noma_radiomap.core import MissionStep
-from noma_radiomap.vector import NomaRadioMapVecEnv
+from noma_radiomap.vector import MissionView, NomaRadioMapVecEnv
 
 
 class MissionVecEnv(VecEnv):
@@ -36,6 +37,7 @@ class MissionVecEnv(VecEnv):
         self.vec_env = NomaRadioMapVecEnv(num_envs=num_envs, **env_kwargs)
         super().__init__(num_envs, self.vec_env.single_observation_space, self.vec_env.single_action_space)
         self._actions: np.ndarray | None = None
+        self._clear_next_reset()
 
     @classmethod
     def from_id(cls, env_id: str, num_envs: int = 1, **kwargs: Any) -> "MissionVecEnv":
@@ -51,11 +53,40 @@ class MissionVecEnv(VecEnv):
             raise ValueError(f"env_id: {env_id!r} is not a mission id of noma_radiomap")
         return cls(num_envs, **{**spec.kwargs, **kwargs})
 
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """
+        Seed the missions at the next :meth:`reset`: mission ``i`` gets ``seed + i``, as SB3's ``VecEnv.seed``.
+
+        :param seed: seed of mission 0 (None: drawn from NumPy's global generator, as SB3 draws it)
+        :return: the seed of each mission
+        """
+        if seed is None:
+            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        self._next_seeds = [seed + i for i in range(self.num_envs)]
+        return list(self._next_seeds)
+
+    def set_options(self, options: list[dict] | dict | None = None) -> None:
+        """
+        Reset options of the missions at the next :meth:`reset`, as SB3's ``VecEnv.set_options``.
+
+        :param options: the single env's reset options (``starts``, ``destinations``), one dict for every mission
+            or one per mission (copied); None: none
+        """
+        if options is None or isinstance(options, dict):
+            options = [options or {}] * self.num_envs
+        self._next_options = copy.deepcopy(list(options))
+
+    def _clear_next_reset(self) -> None:
+        # The seeds and options of :meth:`seed` / :meth:`set_options` serve one reset, as in SB3; they are kept
+        # here rather than in SB3's private attributes.
+        self._next_seeds: list[int | None] = [None] * self.num_envs
+        self._next_options: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+
     def reset(self) -> VecEnvObs:
-        self.vec_env.reset_missions(np.arange(self.num_envs), list(self._seeds), [opt or None for opt in self._options])
+        options = [opt or None for opt in self._next_options]
+        self.vec_env.reset_missions(np.arange(self.num_envs), self._next_seeds, options)
         self.reset_infos = [{} for _ in range(self.num_envs)]
-        self._reset_seeds()
-        self._reset_options()
+        self._clear_next_reset()
         return self.vec_env.observations()
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -79,8 +110,8 @@ class MissionVecEnv(VecEnv):
     def close(self) -> None:
         self.vec_env.close()
 
-    def _views(self, indices: VecEnvIndices) -> list[Any]:
-        return [self.vec_env.mission(i) for i in self._get_indices(indices)]
+    def _views(self, indices: VecEnvIndices) -> list[MissionView]:
+        return self.vec_env.missions(indices)
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         return [getattr(view, attr_name) for view in self._views(indices)]
@@ -88,7 +119,7 @@ class MissionVecEnv(VecEnv):
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         if attr_name != "reward_phase":
             raise AttributeError(f"set_attr: only 'reward_phase' can be set on the mission vector env, got {attr_name!r}")
-        self.vec_env.set_reward_phase(value, indices=list(self._get_indices(indices)))
+        self.vec_env.set_reward_phase(value, indices=indices)
 
     def env_method(
         self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
@@ -96,7 +127,7 @@ class MissionVecEnv(VecEnv):
         return [getattr(view, method_name)(*method_args, **method_kwargs) for view in self._views(indices)]
 
     def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
-        return [False for _ in self._get_indices(indices)]
+        return [False for _ in self._views(indices)]
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         raise NotImplementedError("the mission vector env does not render; render a single env (gymnasium.make)")

@@ -146,6 +146,41 @@ def test_env_method_reward_phases_and_components():
         env.env_method("set_reward_phase", "fast")
 
 
+def test_seed_and_set_options_give_the_missions_of_a_dummy_vec_env():
+    n, kwargs = 3, {"scenario": "small"}
+    batched = MissionVecEnv.from_id("NomaRadioMap-v0", n, **kwargs)
+    single = DummyVecEnv([lambda: gym.make("NomaRadioMap-v0", **kwargs)] * n)
+
+    def missions(env):
+        """Starts and destinations of every mission, (N, U, 2) each."""
+        return np.stack(env.get_attr("positions")), np.stack(env.get_attr("destinations"))
+
+    def assert_same_resets():
+        np.testing.assert_array_equal(batched.reset(), single.reset())
+        for batched_points, single_points in zip(missions(batched), missions(single), strict=True):
+            np.testing.assert_array_equal(batched_points, single_points)
+
+    assert batched.seed(7) == list(single.seed(7)) == [7, 8, 9]
+    assert_same_resets()
+    starts, destinations = missions(batched)
+    assert_same_resets()  # the seeds serve one reset: the generators go on
+    for env in (batched, single):
+        env.set_options({"starts": starts[0]})
+    assert_same_resets()
+    np.testing.assert_array_equal(missions(batched)[0], np.broadcast_to(starts[0], starts.shape))
+    per_mission = [{} if i == 1 else {"starts": starts[i], "destinations": destinations[i]} for i in range(n)]
+    for env in (batched, single):
+        env.seed(3)
+        env.set_options(per_mission)
+    assert_same_resets()
+    np.testing.assert_array_equal(missions(batched)[1][[0, 2]], destinations[[0, 2]])
+    np.random.seed(5)
+    drawn = batched.seed()
+    np.random.seed(5)
+    assert drawn == list(single.seed())
+    assert_same_resets()
+
+
 def test_make_mission_vec_env_monitors_episodes():
     env = make_mission_vec_env("NomaRadioMap-v0", n_envs=2, seed=0, env_kwargs={"scenario": "small", "max_episode_steps": 5})
     env.reset()

@@ -187,6 +187,14 @@ class NomaRadioMapVecEnv(VectorEnv):
             raise IndexError(f"mission index must be in [0, {self.num_envs}), got {index!r}")
         return MissionView(self, int(index))
 
+    def missions(self, indices: Any = None) -> list[MissionView]:
+        """
+        Some missions as single envs (:class:`MissionView`).
+
+        :param indices: None (every mission), an index or a sequence of indices
+        """
+        return [self.mission(i) for i in self._rows(indices)]
+
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         results = []
         for i in range(self.num_envs):
