@@ -325,17 +325,7 @@ def _run_compare(args: argparse.Namespace) -> None:
     from sb3_dtdpg.experiments.compare import run_compare
 
     run_compare(
-        args.out,
-        scenario=args.scenario,
-        budget=args.budget,
-        seeds=args.n_seeds,
-        algos=args.algos,
-        modes=args.multiple_access,
-        n_workers=args.workers,
-        progress=not args.no_progress,
-        env_id=args.env,
-        hyperparams=args.hyperparams,
-        observation=args.observation,
+        args.out, scenario=args.scenario, algos=args.algos, modes=args.multiple_access, env_id=args.env, **_run_options(args)
     )
 
 
@@ -372,16 +362,26 @@ def _run_reproduce(args: argparse.Namespace) -> None:
 
     run_reproduce(
         args.out,
-        budget=args.budget,
-        seeds=args.n_seeds,
-        n_workers=args.workers,
-        progress=not args.no_progress,
         train=not args.report_only,
-        hyperparams=args.hyperparams,
-        observation=args.observation,
         experiments=args.experiments,
         multiple_access=args.multiple_access,
+        **_run_options(args),
     )
+
+
+def _run_options(args: argparse.Namespace) -> dict[str, Any]:
+    """
+    :return: the keyword arguments of ``run_compare`` and ``run_reproduce`` from the options both commands take
+        (``--budget``, ``--n-seeds`` and those of :func:`_add_common_run_options`)
+    """
+    return {
+        "budget": args.budget,
+        "seeds": args.n_seeds,
+        "n_workers": args.workers,
+        "progress": not args.no_progress,
+        "hyperparams": args.hyperparams,
+        "observation": args.observation,
+    }
 
 
 def _saved_model_env(args: argparse.Namespace, channel: str, render: bool = False) -> tuple[Any, Any, dict[str, Any]]:

@@ -119,7 +119,8 @@ def test_reproduce_skips_finished_runs(tmp_path):
     assert set(tables["table_ii"]["paper_mqi"]) == {879.5, 868.5, 876.2, 929.0, 919.0}
     comparison = tables["ddpg_vs_dtdpg"].set_index(["algorithm", "multiple_access"])
     assert comparison.loc[("DDPG", "OMA"), "mqi"] == real["eval"]["summary"]["mqi"] != 12345.0
-    for name in ("table_ii.md", "ddpg_vs_dtdpg.md", "learning_rates.md", "paired.md", "fig_maps.png"):
+    figures = ("fig_maps.png", "fig_reward_learning_rates.png", "fig_mqi_per_episode.png")
+    for name in ("table_ii.md", "ddpg_vs_dtdpg.md", "learning_rates.md", "paired.md", *figures):
         assert (tmp_path / name).exists(), name
     assert (tmp_path / "fig_trajectories_noma_oma.png").exists()
     paired = tables["paired"].set_index(["contrast", "multiple_access"])

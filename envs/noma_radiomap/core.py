@@ -361,12 +361,7 @@ class MissionCore:
             outage,
             self._distances(rows),
             self._d_max,
-            (
-                float(constants.time_cost),
-                float(constants.outage_penalty),
-                float(constants.arrival_reward),
-                float(constants.success_reward),
-            ),
+            constants.kernel_constants(),
             self._weights,
             self.arrived,
             self.step_counts,

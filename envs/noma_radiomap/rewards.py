@@ -44,6 +44,10 @@ class RewardConstants:
     arrival_reward: float = 10.0
     success_reward: float = 200.0
 
+    def kernel_constants(self) -> tuple[float, float, float, float]:
+        """The arguments of :func:`component_rows` after ``d_max``: the four constants as floats, in field order."""
+        return float(self.time_cost), float(self.outage_penalty), float(self.arrival_reward), float(self.success_reward)
+
 
 def phase_weights(phase: str) -> dict[str, float]:
     """
@@ -101,35 +105,9 @@ def reward_components(
         robots_shape = np.broadcast_shapes(robots_shape, arriving.shape, outage.shape, distance.shape)
         active, arriving, outage, distance = (np.broadcast_to(x, robots_shape) for x in (active, arriving, outage, distance))
     shape, rows = robots_shape[:-1], (-1, robots_shape[-1])
-    values = component_values(
-        active.reshape(rows), arriving.reshape(rows), outage.reshape(rows), distance.reshape(rows), d_max, constants
-    )
+    robots = (x.reshape(rows) for x in (active, arriving, outage, distance))
+    values = component_rows(*robots, float(d_max), *constants.kernel_constants())
     return dict(zip(REWARD_COMPONENTS, values.reshape(len(REWARD_COMPONENTS), *shape), strict=True))
-
-
-def component_values(
-    active: np.ndarray,
-    arriving: np.ndarray,
-    outage: np.ndarray,
-    distance: np.ndarray,
-    d_max: float,
-    constants: RewardConstants,
-) -> np.ndarray:
-    """
-    :func:`reward_components` of (M, U) robots (bool arrays and float64 distances of exactly that shape: the
-    mission engine's fast path), as the rows of a (5, M) array in the order of :data:`REWARD_COMPONENTS`.
-    """
-    return component_rows(
-        active,
-        arriving,
-        outage,
-        distance,
-        float(d_max),
-        float(constants.time_cost),
-        float(constants.outage_penalty),
-        float(constants.arrival_reward),
-        float(constants.success_reward),
-    )
 
 
 @compiled

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
-if TYPE_CHECKING:
-    from sb3_dtdpg.experiments.specs import RunSpec
+from sb3_dtdpg.experiments.specs import RunSpec
 
 __all__ = ["BUDGETS", "BUDGET_ALIASES", "PUBLIC_BUDGETS", "Budget", "check_budget", "get_budget"]
 
@@ -44,6 +43,22 @@ class Budget:
         """Training episodes of the paper-task runs trained in "reality": :attr:`task_episodes` made longer as
         ``long_episodes`` is longer than ``episodes`` (the paper: 700)."""
         return round(self.task_episodes * self.long_episodes / self.episodes)
+
+    def run_spec(self, algo: str, multiple_access: str, seed: int, episodes: int | None = None, **fields: Any) -> RunSpec:
+        """
+        A run at this scale: on the budget's scenario, tested on its number of test episodes.
+
+        :param algo: the run's algorithm (:attr:`RunSpec.algo`)
+        :param multiple_access: ``"noma"`` or ``"oma"``
+        :param seed: training seed
+        :param episodes: training episodes (None: :attr:`episodes`)
+        :param fields: the run's other fields (:class:`RunSpec`)
+        :return: the run
+        """
+        episodes = self.episodes if episodes is None else episodes
+        return RunSpec(
+            algo, multiple_access, seed, episodes, scenario=self.scenario, eval_episodes=self.eval_episodes, **fields
+        )
 
 
 #: ``tiny`` runs the whole pipeline on the ``small`` scenario in minutes (too short to learn: a check that it runs; its

@@ -51,14 +51,12 @@ def compare_specs(
     :return: the runs of a comparison (every algorithm x mode x seed)
     """
     return [
-        RunSpec(
+        budget.run_spec(
             algo,
             mode,
             seed,
-            budget.episodes if episodes is None else episodes,
+            episodes,
             env_id=env_id,
-            scenario=budget.scenario,
-            eval_episodes=budget.eval_episodes,
             tag=tag,
             eval_before_transfer=eval_before_transfer,
             hyperparams=hyperparams,

@@ -81,15 +81,13 @@ def _spec(
     observation: str = "goal",
 ) -> RunSpec:
     tag = f"{'radio_map' if channel == 'radio_map' else 'reality'}_{episodes}" + (f"_lr{lr:g}" if lr is not None else "")
-    return RunSpec(
+    return budget.run_spec(
         algo,
         mode,
         seed,
         episodes,
         channel=channel,
         learning_rate=lr,
-        scenario=budget.scenario,
-        eval_episodes=budget.eval_episodes,
         tag=tag,
         hyperparams=hyperparams,
         observation=observation,
@@ -420,20 +418,19 @@ def _figures(
         return groups
 
     if groups := dirs("learning_rates"):
-        plots.plot_learning_curves(
-            groups,
-            out / "fig_reward_learning_rates.png",
-            tags=(("episode/return", "reward per episode (phase reward)"),),
-            smooth=5,
-            title=f"DT-DPG reward per episode, two learning rates\n({where}; dotted: transfer)",
-        )
-        plots.plot_learning_curves(
-            groups,
-            out / "fig_mqi_per_episode.png",
-            tags=(("mission/mqi", "MQI per episode"),),
-            smooth=5,
-            title=f"DT-DPG MQI per episode\n({where}; dotted: transfer to MQI training)",
-        )
+        for file, tag, title in (
+            (
+                "fig_reward_learning_rates.png",
+                ("episode/return", "reward per episode (phase reward)"),
+                f"DT-DPG reward per episode, two learning rates\n({where}; dotted: transfer)",
+            ),
+            (
+                "fig_mqi_per_episode.png",
+                ("mission/mqi", "MQI per episode"),
+                f"DT-DPG MQI per episode\n({where}; dotted: transfer to MQI training)",
+            ),
+        ):
+            plots.plot_learning_curves(groups, out / file, tags=(tag,), smooth=5, title=title)
     if groups := dirs("ddpg_vs_dtdpg"):
         plots.plot_learning_curves(
             groups, out / "fig_ddpg_vs_dtdpg.png", title=f"DDPG vs DT-DPG (radio-map training; {where})"
