@@ -1,21 +1,23 @@
 """
 Training speed of DTDPG vs SB3's DDPG, measured side by side in one process.
 
-All learn with the same hyperparameters (DTDPG's defaults: learning rate 1e-3, tau 0.005, gamma 0.95, 3-step
-returns; network sizes, batch size, buffer size and learning starts from the command line) on the same env, with an
-OU action noise (DTDPG: its default linearly decayed OU noise; DDPG: SB3's constant OU noise of the same initial
-scale), one gradient step per env step. Variants: SB3's DDPG as SB3 builds it (default Adam), with the fused
-Adam that DTDPG uses by default, and with the lean training step (``LeanDDPG``: SB3's DDPG bit for bit); DTDPG
-with its lean training step (the default) and with SB3's generic step (``lean=False``, the same numbers, bit for
-bit). After a warm-up, the models alternate
+All learn with the same hyperparameters (learning rate 1e-3, tau 0.005, gamma 0.95, 3-step returns; network
+sizes, batch size, buffer size and learning starts from the command line) on the same env, with an OU action noise
+(DTDPG: its default linearly decayed OU noise; DDPG: SB3's constant OU noise of the same initial scale), one
+gradient step per env step. Variants: SB3's DDPG as SB3 builds it (default Adam), with the fused Adam that DTDPG
+uses by default, and with the lean training step (``LeanDDPG``: SB3's DDPG bit for bit, its MLPs written out);
+DTDPG with its lean training step (the default: the backward passes written out), the lean step through autograd
+(``backprop=False``) and SB3's generic step (``lean=False``), all three the same numbers, bit for bit. After a
+warm-up, the models alternate
 ``learn(--steps, reset_num_timesteps=False)`` chunks ``--repeats`` times (the order reversed every other round),
 so that load changes on the machine hit all alike. Printed: the median steps/s (wall clock) of each, and the
 median of the per-repeat ratios DTDPG / variant, from wall-clock and from process CPU time, and variant / SB3 DDPG
 (CPU time).
 
-The floor: copies of the same networks doing their forward passes, backward passes and fused Adam steps on one
+The floors: copies of the same networks doing their forward passes, backward passes and fused Adam steps on one
 fixed batch (no env, no replay buffer, no target update, no logging), timed in the same rounds as the chunks:
-updates/s, what steps/s would be at one update per step if nothing else cost anything.
+updates/s, what steps/s would be at one update per step if nothing else cost anything. Through autograd for both
+algorithms' networks, and written out (:mod:`sb3_dtdpg.dtdpg.backprop`) for DTDPG's.
 
     python benchmarks/train_speed.py                      # Pendulum-v1, and NomaRadioMap-v0 if installed
     python benchmarks/train_speed.py --net-arch 400 300   # the networks of the DDPG paper
@@ -31,6 +33,7 @@ import argparse
 import copy
 import time
 from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -40,7 +43,8 @@ from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from torch.nn import functional as F
 
 from sb3_dtdpg import DTDPG
-from sb3_dtdpg.dtdpg.lean import LeanDDPG
+from sb3_dtdpg.dtdpg.backprop import BackpropNetworks
+from sb3_dtdpg.dtdpg.lean import FusedAdamStep, LeanDDPG
 
 #: The model whose ratios to the others are printed, and the baseline of the bar.
 DTDPG_LEAN, BASELINE = "DTDPG", "SB3 DDPG"
@@ -62,6 +66,18 @@ def _timed_learn(model: DDPG, steps: int) -> tuple[float, float]:
     return steps / (time.perf_counter() - wall), steps / (time.process_time() - cpu)
 
 
+def _floor_copy(model: DDPG, batch_size: int) -> tuple[Any, Any, Any]:
+    """:return: one batch of the model's replay buffer, its discounts, and a copy of its policy in training mode with
+    new fused Adam optimizers"""
+    data = model.replay_buffer.sample(batch_size)
+    discounts = data.discounts if data.discounts is not None else model.gamma
+    policy = copy.deepcopy(model.policy)
+    policy.set_training_mode(True)
+    policy.actor.optimizer = th.optim.Adam(policy.actor.parameters(), lr=1e-4, fused=True)
+    policy.critic.optimizer = th.optim.Adam(policy.critic.parameters(), lr=1e-4, fused=True)
+    return data, discounts, policy
+
+
 def floor_update(model: DDPG, batch_size: int) -> Callable[[], None]:
     """
     The bare math of one DDPG update of a copy of ``model``'s networks: target forward passes, critic forward,
@@ -72,13 +88,9 @@ def floor_update(model: DDPG, batch_size: int) -> Callable[[], None]:
     :param batch_size: Minibatch size
     :return: A function doing one update
     """
-    data = model.replay_buffer.sample(batch_size)
-    discounts = data.discounts if data.discounts is not None else model.gamma
-    policy = copy.deepcopy(model.policy)
-    policy.set_training_mode(True)
+    data, discounts, policy = _floor_copy(model, batch_size)
     actor, critic, actor_target, critic_target = policy.actor, policy.critic, policy.actor_target, policy.critic_target
-    actor_opt = th.optim.Adam(actor.parameters(), lr=1e-4, fused=True)
-    critic_opt = th.optim.Adam(critic.parameters(), lr=1e-4, fused=True)
+    actor_opt, critic_opt = actor.optimizer, critic.optimizer
 
     def update() -> None:
         with th.no_grad():
@@ -92,6 +104,31 @@ def floor_update(model: DDPG, batch_size: int) -> Callable[[], None]:
         actor_opt.step()
 
     for _ in range(10):
+        update()
+    return update
+
+
+def floor_update_written_out(model: DTDPG, batch_size: int) -> Callable[[], None]:
+    """
+    :func:`floor_update` with the backward passes written out (:class:`~sb3_dtdpg.dtdpg.backprop.BackpropNetworks`).
+
+    :param model: A DTDPG model whose replay buffer holds at least ``batch_size`` transitions
+    :param batch_size: Minibatch size
+    :return: A function doing one update
+    """
+    data, discounts, policy = _floor_copy(model, batch_size)
+    networks = BackpropNetworks(policy)
+    actor_adam, critic_adam = FusedAdamStep(policy.actor.optimizer), FusedAdamStep(policy.critic.optimizer)
+
+    def update() -> None:
+        with th.no_grad():
+            next_actions = networks.actor_target.forward(data.next_observations)
+            next_q = networks.critic_target.forward(data.next_observations, next_actions)
+            target = data.rewards + (1 - data.dones) * discounts * next_q
+            networks.critic_step(data, target, critic_adam)
+            networks.actor_step(data.observations, actor_adam)
+
+    for _ in range(10):  # the first steps create the optimizers' state (then the fused kernel runs on it)
         update()
     return update
 
@@ -118,6 +155,7 @@ def benchmark(env_id: str, net_arch: list[int], batch_size: int, steps: int, rep
         "SB3 DDPG fused Adam": ddpg(optimizer_kwargs=dict(fused=True)),
         "LeanDDPG": ddpg(LeanDDPG),  # SB3's DDPG (default Adam) with the lean step: the same weights bit for bit
         "DTDPG lean=False": DTDPG("MlpPolicy", env_id, policy_kwargs=dict(net_arch=net_arch), lean=False, **common),
+        "DTDPG autograd": DTDPG("MlpPolicy", env_id, policy_kwargs=dict(net_arch=net_arch), backprop=False, **common),
         DTDPG_LEAN: dtdpg,
     }
     for model in models.values():  # warm-up: fill past learning_starts, first gradient steps
@@ -125,6 +163,7 @@ def benchmark(env_id: str, net_arch: list[int], batch_size: int, steps: int, rep
     floors = {
         "floor, DDPG's networks": floor_update(models[BASELINE], batch_size),
         "floor, DTDPG's networks": floor_update(dtdpg, batch_size),
+        "floor, DTDPG's written out": floor_update_written_out(dtdpg, batch_size),
     }
     wall: dict[str, list[float]] = {name: [] for name in [*models, *floors]}
     cpu: dict[str, list[float]] = {name: [] for name in [*models, *floors]}

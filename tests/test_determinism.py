@@ -8,6 +8,8 @@ Digests are per kind of CPU (:func:`simd_level`): numpy picks its float64 kernel
 widest SIMD the CPU has, and its AVX-512 kernels differ from its AVX2 ones by a few units in the last place
 (relative differences of ~1e-15 in the radio map's gains, in ~7 % of the cells of ``mall``). The same code gives
 other bits there, so each kind has its own recorded digests; on a kind with none recorded the tests are skipped.
+The training digest depends on torch's matrix kernels instead (:func:`matmul_level`): MKL runs its AVX-512 code on
+Intel CPUs only, so an AMD CPU with AVX-512 gives the training digest of an AVX2 machine.
 """
 
 import functools
@@ -53,6 +55,30 @@ def simd_level() -> str:
     if features.get("AVX2"):
         return "x86-64-v3"
     return platform.machine()
+
+
+def matmul_level() -> str:
+    """The kind of CPU the training digest depends on: the widest SIMD of MKL's matrix kernels (AVX-512 on Intel
+    CPUs only)."""
+    import torch as th
+
+    capability = th.backends.cpu.get_cpu_capability()
+    if capability == "AVX512" and _cpu_vendor() == "GenuineIntel":
+        return "x86-64-v4"
+    if capability in ("AVX512", "AVX2"):
+        return "x86-64-v3"
+    return platform.machine()
+
+
+def _cpu_vendor() -> str:
+    try:
+        with open("/proc/cpuinfo") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith("vendor_id"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor()
 
 
 #: The scenarios whose radio maps are fingerprinted.
@@ -105,10 +131,10 @@ EXPECTED: dict[str, dict] = {
 }
 
 
-def expected(kind: str, name: str | None = None) -> dict[str, str] | str:
-    """The recorded digests of ``kind`` (its ``name`` entry if given) on this machine's :func:`simd_level`; skips the
-    test where none is recorded."""
-    level = simd_level()
+def expected(kind: str, name: str | None = None, level: str | None = None) -> dict[str, str] | str:
+    """The recorded digests of ``kind`` (its ``name`` entry if given) on this machine's ``level`` (default:
+    :func:`simd_level`); skips the test where none is recorded."""
+    level = simd_level() if level is None else level
     if level not in EXPECTED:
         pytest.skip(f"no digests recorded for this kind of CPU ({level}); record them with python tests/test_determinism.py")
     recorded = EXPECTED[level][kind]
@@ -250,7 +276,7 @@ def test_planner_fingerprint(name: str) -> None:
 
 @pytest.mark.slow
 def test_training_fingerprint() -> None:
-    assert training_digest() == expected("training")
+    assert training_digest() == expected("training", level=matmul_level())
 
 
 if __name__ == "__main__":
@@ -258,7 +284,7 @@ if __name__ == "__main__":
 
     if "--no-training" in sys.argv:
         training_digest = lambda: "(skipped)"  # noqa: E731
-    print(f"EXPECTED[{simd_level()!r}] = ", end="")
+    print(f"EXPECTED[{simd_level()!r}] = (training: EXPECTED[{matmul_level()!r}]) ", end="")
     print(
         {
             "rollouts": {name: rollout_digest(env_id, kwargs) for name, (env_id, kwargs) in ROLLOUTS.items()},

@@ -114,6 +114,11 @@ def _assert_same_tensors(a: dict, b: dict, what: str) -> None:
             assert a[key] == b[key], f"{what}.{key} differs"
 
 
+def _assert_same_training(model, reference) -> None:
+    """The same parameters, batch-norm statistics (and counters) and optimizer states, bit for bit."""
+    _assert_same_training(model, reference)
+
+
 @pytest.mark.parametrize("name", list(CASES))
 def test_lean_step_is_bit_identical_to_sb3_train(name: str, tmp_path: Path) -> None:
     case = CASES[name]
@@ -127,13 +132,13 @@ def test_lean_step_is_bit_identical_to_sb3_train(name: str, tmp_path: Path) -> N
     trainer = getattr(lean, CACHE_ATTRIBUTE)
     assert trainer.critic_adam._tensors is not None and trainer.actor_adam._tensors is not None
     assert getattr(reference, CACHE_ATTRIBUTE, None) is None
+    # MLP networks on vector observations train with the backward passes written out; Dict observations with autograd
+    assert (trainer.networks is not None) == (case["policy"] == "MlpPolicy")
 
     assert lean._n_updates == reference._n_updates > 50
     assert lean.num_timesteps == reference.num_timesteps == 220
     # Parameters of the four networks, batch-norm running statistics (and counters) included
-    _assert_same_tensors(lean.policy.state_dict(), reference.policy.state_dict(), "policy")
-    _assert_same_tensors(lean.actor.optimizer.state_dict(), reference.actor.optimizer.state_dict(), "actor.optimizer")
-    _assert_same_tensors(lean.critic.optimizer.state_dict(), reference.critic.optimizer.state_dict(), "critic.optimizer")
+    _assert_same_training(lean, reference)
     buffer, reference_buffer = lean.replay_buffer, reference.replay_buffer
     assert np.array_equal(buffer.actions, reference_buffer.actions)
     assert np.array_equal(buffer.rewards, reference_buffer.rewards)
@@ -232,10 +237,10 @@ def test_lean_ddpg_and_td3_are_bit_identical_to_sb3(
         models.append(loaded)
     reference, lean = models
     assert getattr(lean, CACHE_ATTRIBUTE).valid_for(lean) and getattr(reference, CACHE_ATTRIBUTE, None) is None
+    # SB3's plain MLPs: DDPG's one critic is written out, TD3's two critics train with autograd
+    assert (getattr(lean, CACHE_ATTRIBUTE).networks is not None) == (sb3_class is DDPG)
     assert lean._n_updates == reference._n_updates > 100
-    _assert_same_tensors(lean.policy.state_dict(), reference.policy.state_dict(), "policy")
-    _assert_same_tensors(lean.actor.optimizer.state_dict(), reference.actor.optimizer.state_dict(), "actor.optimizer")
-    _assert_same_tensors(lean.critic.optimizer.state_dict(), reference.critic.optimizer.state_dict(), "critic.optimizer")
+    _assert_same_training(lean, reference)
 
 
 @pytest.mark.parametrize("share_features_extractor", [False, True])
@@ -264,6 +269,41 @@ def test_lean_step_with_a_cnn_is_bit_identical(share_features_extractor: bool) -
         models.append(model)
     reference, lean_model = models
     assert lean_model._n_updates == reference._n_updates > 0
-    _assert_same_tensors(lean_model.policy.state_dict(), reference.policy.state_dict(), "policy")
-    _assert_same_tensors(lean_model.actor.optimizer.state_dict(), reference.actor.optimizer.state_dict(), "actor.optimizer")
-    _assert_same_tensors(lean_model.critic.optimizer.state_dict(), reference.critic.optimizer.state_dict(), "critic.optimizer")
+    _assert_same_training(lean_model, reference)
+
+
+@pytest.mark.parametrize(
+    ("policy_kwargs", "written_out"),
+    [
+        # DT-DPG's networks at the benchmark's size (the matrix kernels of a larger batch), three hidden layers
+        (dict(net_arch=[128, 128, 64]), True),
+        # Without batch norms (TD3's plain actor, SB3's plain critic)
+        (dict(net_arch=[64, 64], actor_norm="none", critic_norm="none"), True),
+        # Not covered: layer norm, another activation (autograd)
+        (dict(net_arch=[64, 64], actor_norm="layer"), False),
+        (dict(net_arch=[64, 64], activation_fn=th.nn.Tanh), False),
+    ],
+)
+def test_written_out_backward_is_bit_identical_to_autograd(policy_kwargs: dict, written_out: bool) -> None:
+    models = []
+    for backprop in (False, True):
+        th.manual_seed(7)
+        model = DTDPG(
+            "MlpPolicy",
+            make_vec_env(_point_env, n_envs=2, seed=0),
+            learning_starts=150,
+            batch_size=128,
+            n_steps=3,
+            gradient_steps=2,
+            policy_kwargs=policy_kwargs,
+            seed=4,
+            phases=PHASES,
+            backprop=backprop,
+        )
+        model.learn(300)
+        models.append(model)
+    autograd, backprop_model = models
+    assert (getattr(backprop_model, CACHE_ATTRIBUTE).networks is not None) == written_out
+    assert backprop_model._n_updates == autograd._n_updates == 150
+    _assert_same_training(backprop_model, autograd)
+    assert backprop_model.logger.name_to_value["train/critic_loss"] == autograd.logger.name_to_value["train/critic_loss"]

@@ -93,9 +93,12 @@ class DTDPG(LeanStep, DDPG):
     :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
         them over (ablation of the transfer, :meth:`reinitialize`)
     :param lean: Train and act with the lean step (:mod:`sb3_dtdpg.dtdpg.lean`): SB3's TD3/DDPG update and
-        acting path with the same numbers bit for bit for the same seed, in fewer operations (~1.2x the steps/s of
-        ``lean=False`` on one CPU thread, docs/BENCHMARKS.md); False: SB3's generic ``train()`` and
-        ``_sample_action()`` (the reference the lean step is tested against)
+        acting path with the same numbers bit for bit for the same seed, in fewer operations (docs/BENCHMARKS.md,
+        "Training speed"); False: SB3's generic ``train()`` and ``_sample_action()`` (the reference the lean step is
+        tested against)
+    :param backprop: In the lean step, run the MLP networks with their backward passes written out
+        (:mod:`sb3_dtdpg.dtdpg.backprop`, the same numbers as autograd); False, or networks it does not cover
+        (images, ``Dict`` observations, layer norm, other activations): autograd
     :param _init_setup_model: Whether or not to build the network at the creation of the instance
     """
 
@@ -132,6 +135,7 @@ class DTDPG(LeanStep, DDPG):
         curriculum_save_path: str | None = None,
         reinitialize_at_transfer: bool = False,
         lean: bool = True,
+        backprop: bool = True,
         _init_setup_model: bool = True,
     ):
         settings: dict[str, Any] = dict(
@@ -164,6 +168,7 @@ class DTDPG(LeanStep, DDPG):
         )
         self.curriculum_save_path = curriculum_save_path
         self.lean = lean
+        self.backprop = backprop
         self.reinitialize_at_transfer = reinitialize_at_transfer
         # Set by CurriculumTransferCallback at the first learn(), then saved with the model
         self.curriculum_state: dict[str, Any] | None = None

@@ -8,7 +8,9 @@ bit-identical to it (``tests/test_lean_step.py``). What is left out is work that
 the critic's weights in the actor loss (:func:`torch.autograd.grad` with respect to the actor's parameters only),
 the per-call bookkeeping of ``Optimizer.step`` (the fused Adam kernel is applied to the optimizer's own state),
 one in-place kernel per tensor in the Polyak updates (``torch._foreach_*``), and the checks and copies of
-``predict`` when acting.
+``predict`` when acting. For MLP networks on vector observations (DT-DPG's and SB3's own), the forward and
+backward passes run without autograd's graph (:mod:`sb3_dtdpg.dtdpg.backprop`), the same kernels on the same
+tensors.
 """
 
 from typing import Any
@@ -20,6 +22,8 @@ from stable_baselines3 import DDPG, TD3
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.preprocessing import is_image_space
 from torch.nn import functional as F
+
+from sb3_dtdpg.dtdpg.backprop import BackpropNetworks
 
 #: Name of the model attribute holding the lean path's caches (excluded from saving).
 CACHE_ATTRIBUTE = "_lean_cache"
@@ -123,6 +127,7 @@ class LeanTrainer:
 
     def __init__(self, model: Any):
         self.owners = self._owners(model)
+        self.networks = BackpropNetworks.of(model)
         self.actor_adam = FusedAdamStep(model.actor.optimizer)
         self.critic_adam = FusedAdamStep(model.critic.optimizer)
         # The gradients are those of the parameters each optimizer updates
@@ -190,9 +195,34 @@ def lean_train(model: Any, gradient_steps: int, batch_size: int) -> None:
     trainer = lean_trainer(model)
     model.policy.set_training_mode(True)
     model._update_learning_rate([model.actor.optimizer, model.critic.optimizer])
+    actor_losses: list[float] = []
+    critic_losses: list[float] = []
+    if trainer.networks is not None and getattr(model, "backprop", True):
+        trainer.networks.train(model, trainer, gradient_steps, batch_size, actor_losses, critic_losses)
+    else:
+        _autograd_train(model, trainer, gradient_steps, batch_size, actor_losses, critic_losses)
+    model.logger.record("train/n_updates", model._n_updates, exclude="tensorboard")
+    if len(actor_losses) > 0:
+        model.logger.record("train/actor_loss", _mean(actor_losses))
+    model.logger.record("train/critic_loss", _mean(critic_losses))
+
+
+def _mean(values: list[float]) -> float:
+    """``np.mean(values)``, without numpy's overhead for the usual one value (the same number)."""
+    return values[0] if len(values) == 1 else float(np.mean(values))
+
+
+def _autograd_train(
+    model: Any,
+    trainer: LeanTrainer,
+    gradient_steps: int,
+    batch_size: int,
+    actor_losses: list[float],
+    critic_losses: list[float],
+) -> None:
+    """The gradient steps of :func:`lean_train` through autograd (any networks)."""
     actor, critic, actor_target, critic_target = model.actor, model.critic, model.actor_target, model.critic_target
     single_critic = critic.n_critics == 1
-    actor_losses, critic_losses = [], []
     for _ in range(gradient_steps):
         model._n_updates += 1
         data = model.replay_buffer.sample(batch_size, env=model._vec_normalize_env)
@@ -222,11 +252,6 @@ def lean_train(model: Any, gradient_steps: int, batch_size: int) -> None:
             trainer.actor_adam.step(th.autograd.grad(actor_loss, trainer.actor_params, allow_unused=True))
             trainer.polyak(model.tau)
 
-    model.logger.record("train/n_updates", model._n_updates, exclude="tensorboard")
-    if len(actor_losses) > 0:
-        model.logger.record("train/actor_loss", np.mean(actor_losses))
-    model.logger.record("train/critic_loss", np.mean(critic_losses))
-
 
 def fast_actable(observation_space: spaces.Space) -> bool:
     """:return: whether :func:`policy_action` can act on observations of this space (vector or dict of vectors)"""
@@ -246,13 +271,14 @@ def policy_action(model: Any, observation: np.ndarray | dict[str, np.ndarray]) -
     :return: The actions, in the action space's bounds, one row per env
     """
     policy = model.policy
-    device = policy.device
+    device = model.device
     if isinstance(observation, dict):
         obs: th.Tensor | dict[str, th.Tensor] = {key: th.as_tensor(value, device=device) for key, value in observation.items()}
     else:
         obs = th.as_tensor(observation, device=device)
+    networks = lean_trainer(model).networks if getattr(model, "backprop", True) else None
     with th.inference_mode():
-        actions = model.actor(obs)
+        actions = model.actor(obs) if networks is None else networks.actor.forward(obs)  # type: ignore[arg-type]
     actions = actions.cpu().numpy().reshape((-1, *model.action_space.shape))
     return (
         policy.unscale_action(actions)
@@ -270,6 +296,8 @@ class LeanStep:
 
     #: Train and act with the lean step (False: SB3's generic ``train()`` and ``_sample_action()``)
     lean: bool = True
+    #: In the lean step, write the backward passes out where the networks allow it (False: autograd)
+    backprop: bool = True
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         if not self.lean:
