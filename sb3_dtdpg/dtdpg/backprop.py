@@ -1,6 +1,6 @@
 """
 The gradient step of the DDPG family with the backward passes written out, for the common case of MLP actors and
-critics (DT-DPG's batch-norm networks and SB3's plain ones) on vector observations.
+critics (DT-DPG's batch-norm networks and SB3's plain ones) on vector observations, on the CPU.
 
 Autograd records a graph at every forward pass and walks it at every backward pass; for networks of a few hundred
 units that bookkeeping costs more than the matrix products. Here the forward passes run without a graph and each
@@ -11,8 +11,8 @@ is ``threshold_backward`` on the layer's output, ``tanh`` backward is ``tanh_bac
 ``-1 / n``. So every number is the one autograd gives, bit for bit (``tests/test_lean_step.py`` compares the two
 over whole training runs).
 
-:func:`mlp_step_networks` recognises the networks it can run (anything else trains on the autograd path of
-:mod:`sb3_dtdpg.dtdpg.lean`).
+:meth:`BackpropNetworks.of` recognises the networks it can run; anything else trains on the autograd path of
+:mod:`sb3_dtdpg.dtdpg.lean`.
 """
 
 from dataclasses import dataclass
@@ -291,7 +291,8 @@ class BackpropNetworks:
     def of(cls, model: Any) -> "BackpropNetworks | None":
         """:return: the model's networks, or None where they are not of the kinds this module writes out"""
         space = model.observation_space
-        if not isinstance(space, spaces.Box) or len(space.shape) != 1:
+        # On a GPU, batch norm runs cuDNN's kernels under autograd: only the CPU's are written out here
+        if not isinstance(space, spaces.Box) or len(space.shape) != 1 or th.device(model.device).type != "cpu":
             return None
         networks = cls(model)
         parts = (networks.actor, networks.critic, networks.actor_target, networks.critic_target)
