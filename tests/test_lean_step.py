@@ -309,3 +309,20 @@ def test_written_out_backward_is_bit_identical_to_autograd(policy_kwargs: dict, 
     assert backprop_model._n_updates == autograd._n_updates == 150
     _assert_same_training(backprop_model, autograd)
     assert backprop_model.logger.name_to_value["train/critic_loss"] == autograd.logger.name_to_value["train/critic_loss"]
+
+
+def test_module_hooks_run_the_networks_as_modules() -> None:
+    # A hook registered on any layer is called: the step runs the modules under autograd while one is registered
+    model = _small_model(learning_starts=20, batch_size=8, seed=0)
+    model.learn(30)
+    networks = getattr(model, CACHE_ATTRIBUTE).networks
+    assert networks is not None and not networks.hooked()
+    batches: list[int] = []
+    handle = model.critic.q_networks[0][1].register_forward_hook(lambda module, inputs, output: batches.append(len(output)))
+    assert networks.hooked()
+    model.learn(5, reset_num_timesteps=False)
+    assert batches and set(batches) == {8}  # the critic loss and the actor loss, on training batches
+    handle.remove()
+    assert not networks.hooked()
+    model.learn(5, reset_num_timesteps=False)
+    assert len(batches) == 5 * 2

@@ -24,10 +24,19 @@ from stable_baselines3.common.preprocessing import get_action_dim
 from stable_baselines3.common.torch_layers import FlattenExtractor
 from torch import nn
 from torch.nn import functional as F
+from torch.nn.modules import module as torch_module
 
 from sb3_dtdpg.dtdpg.policies import StateActionBatchNorm
 
 _aten = th.ops.aten
+#: The hook dictionaries of an ``nn.Module``, and torch's global ones
+_MODULE_HOOKS = ("_forward_hooks", "_forward_pre_hooks", "_backward_hooks", "_backward_pre_hooks")
+_GLOBAL_HOOKS = (
+    "_global_forward_hooks",
+    "_global_forward_pre_hooks",
+    "_global_backward_hooks",
+    "_global_backward_pre_hooks",
+)
 #: ``reduction`` of ``mse_loss`` and ``mse_loss_backward``: the mean
 _MEAN = 1
 
@@ -284,8 +293,19 @@ class BackpropNetworks:
         self.critic = MlpCritic(model.critic)
         self.actor_target = MlpActor(model.actor_target)
         self.critic_target = MlpCritic(model.critic_target)
+        modules = [m for net in (model.actor, model.critic, model.actor_target, model.critic_target) for m in net.modules()]
+        # The hooks of every module (and the global ones): dictionaries torch fills in place when a hook is registered
+        self._hooks: list[dict] = [
+            *(getattr(torch_module, name) for name in _GLOBAL_HOOKS),
+            *(getattr(m, name) for m in modules for name in _MODULE_HOOKS),
+        ]
         self.actor_order = _order(self.actor.params, [p for g in model.actor.optimizer.param_groups for p in g["params"]])
         self.critic_order = _order(self.critic.params, [p for g in model.critic.optimizer.param_groups for p in g["params"]])
+
+    def hooked(self) -> bool:
+        """:return: whether a forward or backward hook is registered on a module of the networks (or globally): the
+        written-out passes would not call it, so the networks run as modules under autograd then"""
+        return any(self._hooks)
 
     @classmethod
     def of(cls, model: Any) -> "BackpropNetworks | None":

@@ -183,6 +183,15 @@ def lean_trainer(model: Any) -> LeanTrainer:
     return trainer
 
 
+def _written_out(model: Any, trainer: LeanTrainer) -> BackpropNetworks | None:
+    """:return: the networks with their passes written out, where the model asks for them (``backprop``), they cover
+    its networks and no module hook is registered; else None (autograd and the modules)"""
+    networks = trainer.networks
+    if networks is None or not getattr(model, "backprop", True) or networks.hooked():
+        return None
+    return networks
+
+
 def lean_train(model: Any, gradient_steps: int, batch_size: int) -> None:
     """
     SB3's TD3 ``train()`` (DDPG: TD3 with one critic, no target noise and no policy delay), the same math in
@@ -197,8 +206,9 @@ def lean_train(model: Any, gradient_steps: int, batch_size: int) -> None:
     model._update_learning_rate([model.actor.optimizer, model.critic.optimizer])
     actor_losses: list[float] = []
     critic_losses: list[float] = []
-    if trainer.networks is not None and getattr(model, "backprop", True):
-        trainer.networks.train(model, trainer, gradient_steps, batch_size, actor_losses, critic_losses)
+    networks = _written_out(model, trainer)
+    if networks is not None:
+        networks.train(model, trainer, gradient_steps, batch_size, actor_losses, critic_losses)
     else:
         _autograd_train(model, trainer, gradient_steps, batch_size, actor_losses, critic_losses)
     model.logger.record("train/n_updates", model._n_updates, exclude="tensorboard")
@@ -276,7 +286,7 @@ def policy_action(model: Any, observation: np.ndarray | dict[str, np.ndarray]) -
         obs: th.Tensor | dict[str, th.Tensor] = {key: th.as_tensor(value, device=device) for key, value in observation.items()}
     else:
         obs = th.as_tensor(observation, device=device)
-    networks = lean_trainer(model).networks if getattr(model, "backprop", True) else None
+    networks = _written_out(model, lean_trainer(model))
     with th.inference_mode():
         actions = model.actor(obs) if networks is None else networks.actor.forward(obs)  # type: ignore[arg-type]
     actions = actions.cpu().numpy().reshape((-1, *model.action_space.shape))
