@@ -1,5 +1,4 @@
 import dataclasses
-import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
@@ -197,13 +196,18 @@ class DTDPG(LeanStep, DDPG):
             and issubclass(self.replay_buffer_class, NStepReplayBuffer)
             and self.replay_buffer_kwargs.get("n_steps") == self.n_steps
         )
-        with warnings.catch_warnings():
-            if configured_n_step:
-                # SB3 warns that n_steps is ignored whenever a buffer class is given, also when the class is an n-step
-                # buffer set up with these n_steps (SB3's own, picked before a save, or the relabelling one): the
-                # returns are set up, so the warning would be wrong here
-                warnings.simplefilter("ignore", UserWarning)
+        if not configured_n_step:
             super()._setup_model()
+            return
+        # SB3 warns that n_steps is ignored whenever a buffer class is given, also when the class is an n-step buffer
+        # set up with these n_steps (SB3's own, picked before a save, or the relabelling one): the returns are set
+        # up, so the warning would be wrong. SB3's set-up reads n_steps only to choose a buffer class and to warn:
+        # with the class given, it builds the same model with n_steps set aside for the call
+        n_steps, self.n_steps = self.n_steps, 1
+        try:
+            super()._setup_model()
+        finally:
+            self.n_steps = n_steps
 
     def set_random_seed(self, seed: int | None = None) -> None:
         """
