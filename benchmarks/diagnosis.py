@@ -81,12 +81,14 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "vec4_gs1": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
     "vec8_gs2": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 2}},
     "vec8_gs1": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
+    "vec16_gs1": {"n_envs": 16, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
     "vec2_gs1": {"n_envs": 2, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
     # fewer, larger updates: a minibatch of 512 costs little more than one of 128 on a CPU
     "vec4_gs1_b512": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1, "batch_size": 512}},
     "vec4_gs1_b256": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1, "batch_size": 256}},
     # fewer updates, each a larger step
     "vec4_gs1_lr2e3": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1, "learning_rate": 2e-3}},
+    "vec8_gs1_lr2e3": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 1, "learning_rate": 2e-3}},
 }
 #: The same ablations with the goal-conditioned observation: ``goal_<name>``.
 CONFIGS.update(
