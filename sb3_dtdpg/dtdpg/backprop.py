@@ -296,7 +296,7 @@ class BackpropNetworks:
         modules = [m for net in (model.actor, model.critic, model.actor_target, model.critic_target) for m in net.modules()]
         # The hooks of every module (and the global ones): dictionaries torch fills in place when a hook is registered
         self._hooks: list[dict] = [
-            *(getattr(torch_module, name) for name in _GLOBAL_HOOKS),
+            *(getattr(torch_module, name, {}) for name in _GLOBAL_HOOKS),
             *(getattr(m, name) for m in modules for name in _MODULE_HOOKS),
         ]
         self.actor_order = _order(self.actor.params, [p for g in model.actor.optimizer.param_groups for p in g["params"]])
