@@ -7,6 +7,7 @@ transitions of a single env seeded ``seed + i``. Each mission keeps its own rand
 destinations of its resets, its Rayleigh fading).
 """
 
+import os
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -19,6 +20,7 @@ from noma_radiomap.actions import check_actions
 from noma_radiomap.core import INFO_KEYS, SUMMARY_KEYS, MissionCore, MissionStep, summary_row
 from noma_radiomap.env import NomaRadioMapEnv
 from noma_radiomap.observations import observation_space
+from noma_radiomap.scenario import Scenario
 
 __all__ = ["MissionView", "NomaRadioMapVecEnv", "make_vec_env"]
 
@@ -126,7 +128,7 @@ class NomaRadioMapVecEnv(VectorEnv):
     def __init__(
         self,
         num_envs: int = 1,
-        scenario: Any = "mall",
+        scenario: str | os.PathLike[str] | Scenario = "mall",
         multiple_access: str = "noma",
         channel: str = "radio_map",
         reward_phase: str = "destination",
