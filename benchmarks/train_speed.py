@@ -17,7 +17,10 @@ median of the per-repeat ratios DTDPG / variant, from wall-clock and from proces
 The floors: copies of the same networks doing their forward passes, backward passes and fused Adam steps on one
 fixed batch (no env, no replay buffer, no target update, no logging), timed in the same rounds as the chunks:
 updates/s, what steps/s would be at one update per step if nothing else cost anything. Through autograd for both
-algorithms' networks, and written out (:mod:`sb3_dtdpg.dtdpg.backprop`) for DTDPG's.
+algorithms' networks, and written out (:mod:`sb3_dtdpg.dtdpg.backprop`) for DTDPG's. The ceiling: the written-out
+floor plus SB3's rollout loop and replay sampling, timed as a DTDPG whose gradient steps only sample their batches
+(``1 / ceiling = 1 / floor + 1 / loop``): what DTDPG's steps/s could reach inside SB3's loop with nothing else in
+the update.
 
     python benchmarks/train_speed.py                      # Pendulum-v1, and NomaRadioMap-v0 if installed
     python benchmarks/train_speed.py --net-arch 400 300   # the networks of the DDPG paper
@@ -48,8 +51,20 @@ from sb3_dtdpg.dtdpg.lean import FusedAdamStep, LeanDDPG
 
 #: The model whose ratios to the others are printed, and the baseline of the bar.
 DTDPG_LEAN, BASELINE = "DTDPG", "SB3 DDPG"
+#: DTDPG whose gradient steps only sample their batches: SB3's rollout loop and the replay sampling alone.
+NO_UPDATES = "DTDPG without updates"
+#: The floor of DTDPG's update with its backward passes written out, and the ceiling it sets with SB3's loop around it.
+WRITTEN_OUT_FLOOR, CEILING = "floor, DTDPG's written out", "ceiling, floor + loop"
 #: Hyperparameters shared by all models (DTDPG's defaults), besides those from the command line.
 SHARED = dict(learning_rate=1e-3, tau=0.005, gamma=0.95, n_steps=3)
+
+
+class _NoUpdates(DTDPG):
+    """DTDPG that collects and samples as it trains but updates nothing (see :data:`NO_UPDATES`)."""
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        for _ in range(gradient_steps):
+            self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)
 
 
 def _available(env_id: str) -> bool:
@@ -157,13 +172,14 @@ def benchmark(env_id: str, net_arch: list[int], batch_size: int, steps: int, rep
         "DTDPG lean=False": DTDPG("MlpPolicy", env_id, policy_kwargs=dict(net_arch=net_arch), lean=False, **common),
         "DTDPG autograd": DTDPG("MlpPolicy", env_id, policy_kwargs=dict(net_arch=net_arch), backprop=False, **common),
         DTDPG_LEAN: dtdpg,
+        NO_UPDATES: _NoUpdates("MlpPolicy", env_id, policy_kwargs=dict(net_arch=net_arch), **common),
     }
     for model in models.values():  # warm-up: fill past learning_starts, first gradient steps
         model.learn(max(300, steps // 4))
     floors = {
         "floor, DDPG's networks": floor_update(models[BASELINE], batch_size),
         "floor, DTDPG's networks": floor_update(dtdpg, batch_size),
-        "floor, DTDPG's written out": floor_update_written_out(dtdpg, batch_size),
+        WRITTEN_OUT_FLOOR: floor_update_written_out(dtdpg, batch_size),
     }
     wall: dict[str, list[float]] = {name: [] for name in [*models, *floors]}
     cpu: dict[str, list[float]] = {name: [] for name in [*models, *floors]}
@@ -188,7 +204,10 @@ def benchmark(env_id: str, net_arch: list[int], batch_size: int, steps: int, rep
         )
         for name in models
     }
-    for name in floors:
+    # What DTDPG would reach with the bare update and nothing but SB3's rollout loop and replay sampling around it
+    for times in (wall, cpu):
+        times[CEILING] = list(1 / (1 / np.array(times[NO_UPDATES]) + 1 / np.array(times[WRITTEN_OUT_FLOOR])))
+    for name in [*floors, CEILING]:
         results[name] = dict(
             steps_per_s=float(np.median(wall[name])),
             over_ddpg_wall=float(np.median(np.array(wall[name]) / base_wall)),
