@@ -318,6 +318,7 @@ class BackpropNetworks:
         parts = (networks.actor, networks.critic, networks.actor_target, networks.critic_target)
         return networks if all(part.supported for part in parts) else None
 
+    @th.no_grad()
     def critic_step(self, data: Any, target_q_values: th.Tensor, adam: Any) -> float:
         """
         One update of the critic: MSE to the targets, its backward pass, the Adam step.
@@ -335,6 +336,7 @@ class BackpropNetworks:
         adam.step(tuple(None if i is None else grads[i] for i in self.critic_order))
         return critic_loss.item()
 
+    @th.no_grad()
     def actor_step(self, observations: th.Tensor, adam: Any) -> float:
         """
         One update of the actor: ``-mean(Q(s, mu(s)))``, its backward pass through the critic, the Adam step.
@@ -352,38 +354,3 @@ class BackpropNetworks:
         grads = self.actor.backward(self.critic.backward_actions(grad_q, critic_trace), actor_trace)
         adam.step(tuple(None if i is None else grads[i] for i in self.actor_order))
         return actor_loss.item()
-
-    def train(
-        self,
-        model: Any,
-        trainer: Any,
-        gradient_steps: int,
-        batch_size: int,
-        actor_losses: list[float],
-        critic_losses: list[float],
-    ) -> None:
-        """
-        SB3's TD3 gradient steps (see :func:`sb3_dtdpg.dtdpg.lean.lean_train`), the same numbers.
-
-        :param model: The TD3/DDPG model
-        :param trainer: Its :class:`~sb3_dtdpg.dtdpg.lean.LeanTrainer` (Adam steps, Polyak update)
-        :param gradient_steps: Number of gradient steps
-        :param batch_size: Minibatch size
-        :param actor_losses: Where to append the actor losses
-        :param critic_losses: Where to append the critic losses
-        """
-        with th.no_grad():
-            for _ in range(gradient_steps):
-                model._n_updates += 1
-                data = model.replay_buffer.sample(batch_size, env=model._vec_normalize_env)
-                discounts = data.discounts if data.discounts is not None else model.gamma
-                # The target noise is drawn as SB3 draws it (also when its scale is 0): the generator's stream stays
-                noise = th.empty_like(data.actions).normal_(0, model.target_policy_noise)
-                noise = noise.clamp(-model.target_noise_clip, model.target_noise_clip)
-                next_actions = (self.actor_target.forward(data.next_observations) + noise).clamp(-1, 1)
-                next_q_values = self.critic_target.forward(data.next_observations, next_actions)
-                target_q_values = data.rewards + (1 - data.dones) * discounts * next_q_values
-                critic_losses.append(self.critic_step(data, target_q_values, trainer.critic_adam))
-                if model._n_updates % model.policy_delay == 0:
-                    actor_losses.append(self.actor_step(data.observations, trainer.actor_adam))
-                    trainer.polyak(model.tau)

@@ -204,13 +204,23 @@ def lean_train(model: Any, gradient_steps: int, batch_size: int) -> None:
     trainer = lean_trainer(model)
     model.policy.set_training_mode(True)
     model._update_learning_rate([model.actor.optimizer, model.critic.optimizer])
+    networks = _written_out(model, trainer)
     actor_losses: list[float] = []
     critic_losses: list[float] = []
-    networks = _written_out(model, trainer)
-    if networks is not None:
-        networks.train(model, trainer, gradient_steps, batch_size, actor_losses, critic_losses)
-    else:
-        _autograd_train(model, trainer, gradient_steps, batch_size, actor_losses, critic_losses)
+    for _ in range(gradient_steps):
+        model._n_updates += 1
+        data = model.replay_buffer.sample(batch_size, env=model._vec_normalize_env)
+        target_q_values = _target_q_values(model, data, networks)
+        if networks is None:
+            critic_losses.append(_autograd_critic_step(model, trainer, data, target_q_values))
+        else:
+            critic_losses.append(networks.critic_step(data, target_q_values, trainer.critic_adam))
+        if model._n_updates % model.policy_delay == 0:
+            if networks is None:
+                actor_losses.append(_autograd_actor_step(model, trainer, data.observations))
+            else:
+                actor_losses.append(networks.actor_step(data.observations, trainer.actor_adam))
+            trainer.polyak(model.tau)
     model.logger.record("train/n_updates", model._n_updates, exclude="tensorboard")
     if len(actor_losses) > 0:
         model.logger.record("train/actor_loss", _mean(actor_losses))
@@ -222,45 +232,42 @@ def _mean(values: list[float]) -> float:
     return values[0] if len(values) == 1 else float(np.mean(values))
 
 
-def _autograd_train(
-    model: Any,
-    trainer: LeanTrainer,
-    gradient_steps: int,
-    batch_size: int,
-    actor_losses: list[float],
-    critic_losses: list[float],
-) -> None:
-    """The gradient steps of :func:`lean_train` through autograd (any networks)."""
-    actor, critic, actor_target, critic_target = model.actor, model.critic, model.actor_target, model.critic_target
-    single_critic = critic.n_critics == 1
-    for _ in range(gradient_steps):
-        model._n_updates += 1
-        data = model.replay_buffer.sample(batch_size, env=model._vec_normalize_env)
-        discounts = data.discounts if data.discounts is not None else model.gamma
-        with th.no_grad():
-            # The target noise is drawn as SB3 draws it (also when its scale is 0): the torch generator's stream
-            # stays the same
-            noise = th.empty_like(data.actions).normal_(0, model.target_policy_noise)
-            noise = noise.clamp(-model.target_noise_clip, model.target_noise_clip)
-            next_actions = (actor_target(data.next_observations) + noise).clamp(-1, 1)
-            next_q = critic_target(data.next_observations, next_actions)
-            next_q_values = next_q[0] if single_critic else th.cat(next_q, dim=1).min(dim=1, keepdim=True)[0]
-            target_q_values = data.rewards + (1 - data.dones) * discounts * next_q_values
-        current_q_values = critic(data.observations, data.actions)
-        if single_critic:
-            critic_loss = F.mse_loss(current_q_values[0], target_q_values)
-        else:
-            critic_loss = sum(F.mse_loss(current_q, target_q_values) for current_q in current_q_values)
-        critic_losses.append(critic_loss.item())
-        # allow_unused: a features extractor shared with the actor gets no gradient from the critic loss (SB3's Adam
-        # then skips it, as FusedAdamStep does)
-        trainer.critic_adam.step(th.autograd.grad(critic_loss, trainer.critic_params, allow_unused=True))
+@th.no_grad()
+def _target_q_values(model: Any, data: Any, networks: BackpropNetworks | None) -> th.Tensor:
+    """The bootstrapped targets of TD3 (the minimum over the target critics), through the modules or the written-out
+    networks."""
+    discounts = data.discounts if data.discounts is not None else model.gamma
+    # The target noise is drawn as SB3 draws it (also when its scale is 0): the torch generator's stream stays the same
+    noise = th.empty_like(data.actions).normal_(0, model.target_policy_noise)
+    noise = noise.clamp(-model.target_noise_clip, model.target_noise_clip)
+    if networks is None:
+        next_actions = (model.actor_target(data.next_observations) + noise).clamp(-1, 1)
+        next_q = model.critic_target(data.next_observations, next_actions)
+        next_q_values = next_q[0] if len(next_q) == 1 else th.cat(next_q, dim=1).min(dim=1, keepdim=True)[0]
+    else:
+        next_actions = (networks.actor_target.forward(data.next_observations) + noise).clamp(-1, 1)
+        next_q_values = networks.critic_target.forward(data.next_observations, next_actions)
+    return data.rewards + (1 - data.dones) * discounts * next_q_values
 
-        if model._n_updates % model.policy_delay == 0:
-            actor_loss = -critic.q1_forward(data.observations, actor(data.observations)).mean()
-            actor_losses.append(actor_loss.item())
-            trainer.actor_adam.step(th.autograd.grad(actor_loss, trainer.actor_params, allow_unused=True))
-            trainer.polyak(model.tau)
+
+def _autograd_critic_step(model: Any, trainer: LeanTrainer, data: Any, target_q_values: th.Tensor) -> float:
+    """One update of the critic(s) through autograd (any networks); :return: the loss"""
+    current_q_values = model.critic(data.observations, data.actions)
+    if len(current_q_values) == 1:
+        critic_loss = F.mse_loss(current_q_values[0], target_q_values)
+    else:
+        critic_loss = sum(F.mse_loss(current_q, target_q_values) for current_q in current_q_values)
+    # allow_unused: a features extractor shared with the actor gets no gradient from the critic loss (SB3's Adam then
+    # skips it, as FusedAdamStep does)
+    trainer.critic_adam.step(th.autograd.grad(critic_loss, trainer.critic_params, allow_unused=True))
+    return critic_loss.item()
+
+
+def _autograd_actor_step(model: Any, trainer: LeanTrainer, observations: th.Tensor) -> float:
+    """One update of the actor through autograd (any networks); :return: the loss"""
+    actor_loss = -model.critic.q1_forward(observations, model.actor(observations)).mean()
+    trainer.actor_adam.step(th.autograd.grad(actor_loss, trainer.actor_params, allow_unused=True))
+    return actor_loss.item()
 
 
 def fast_actable(observation_space: spaces.Space) -> bool:
