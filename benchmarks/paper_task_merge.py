@@ -7,6 +7,10 @@ paired by seed) and the reference planners' rows on the same test missions::
     python benchmarks/paper_task_merge.py docs/csv/paper_task_runs.csv results/paper_task/paper_task_runs.csv \\
         --out results/paper_task_merged
 
+The runs trained with Rayleigh fading (``paper_task_reality_runs.csv``) merge the same way into
+``paper_task_reality*`` tables: the training channel is read from the runs' ``training`` column, and runs of
+both channels are not merged into one table.
+
 The training-success figure needs the runs' TensorBoard folders and is drawn by ``reproduce`` per folder.
 """
 
@@ -23,7 +27,9 @@ from sb3_dtdpg.experiments.paper_task import merge_runs, write_tables
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
-    parser.add_argument("runs", type=Path, nargs="+", help="paper_task_runs.csv files of reproduce")
+    parser.add_argument(
+        "runs", type=Path, nargs="+", help="paper_task_runs.csv or paper_task_reality_runs.csv files of reproduce"
+    )
     parser.add_argument("--out", type=Path, required=True, help="folder for the merged tables")
     parser.add_argument("--budget", default="paper", help="the runs' budget (default: paper)")
     args = parser.parse_args()
@@ -38,8 +44,11 @@ def main() -> None:
         records = merge_runs([pd.read_csv(path) for path in args.runs])
     except ValueError as error:
         parser.error(str(error))
+    channels = sorted(records["training"].unique())
+    if len(channels) != 1:
+        parser.error(f"the runs were trained on several channels ({', '.join(channels)}): merge each channel's files alone")
     args.out.mkdir(parents=True, exist_ok=True)
-    write_tables(args.out, budget, records)
+    write_tables(args.out, budget, records, channel=channels[0])
     print(f"\n{len(records)} runs from {len(args.runs)} files; tables in {args.out}")
 
 

@@ -765,7 +765,7 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         choices=_EXPERIMENTS,
         default=None,
-        help="train only the runs of these experiments (default: all but paper_task_reality, some 4-5 CPU hours at the "
+        help="train only the runs of these experiments (default: all but paper_task_reality, about 5 CPU hours at the "
         "paper's scale); the tables use every finished run",
     )
     p.add_argument(

@@ -57,7 +57,7 @@ PAPER_TABLE_II: dict[tuple[str, str, str], float] = {
 #: The experiments of :func:`reproduce_specs`, by name.
 EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
 #: What ``reproduce`` trains unless told otherwise: all but the paper task's "reality" training, which at the paper's
-#: scale takes some 4-5 CPU hours more, most of it its Table I runs (``--experiments paper_task_reality`` asks for it).
+#: scale takes about 5 CPU hours more, most of it its Table I runs (``--experiments paper_task_reality`` asks for it).
 DEFAULT_EXPERIMENTS = EXPERIMENTS[:-1]
 #: The paper's two learning rates (Fig. 6).
 LEARNING_RATES = (1e-4, 1e-3)
