@@ -10,6 +10,9 @@ the default room is calibrated for:
 - NOMA: the best planner's NOMA - its OMA, >= 25 MQI;
 
 and, on the radio-map channel, the smallest per-mission difference best - shortest-path (never negative).
+Last, the longest mission the room allows one robot: the shortest path from its start area to the farthest free
+cell, in metres and in steps at ``V_max`` (with Rayleigh fading the NOMA margin is bounded by about 0.33 outages per
+step of mission time, docs/SCENARIOS.md).
 The test missions are those of ``sb3-dtdpg compare``: episode ``i`` reset with seed ``10000 + i``.
 
 Usage::
@@ -26,7 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 import noma_radiomap  # noqa: F401  (registers the envs)
-from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, mqi_upper_bound
+from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, grid_costs_to_goal, mqi_upper_bound
 from sb3_dtdpg.evaluation import evaluate
 
 MIN_PATH_MARGIN = 15.0
@@ -70,6 +73,33 @@ def measure(scenario: str = "mall", episodes: int = 20, seed: int = 10_000) -> d
     return figures
 
 
+def longest_mission(scenario: str = "mall") -> list[tuple[float, float]]:
+    """
+    :param scenario: scenario name or path
+    :return: per robot, the longest shortest path (metres) from a cell of its start area to any free cell the
+        robot can reach, and the steps it takes at ``V_max`` (less the arrival radius)
+    """
+    env = gym.make("NomaRadioMap-v0", scenario=scenario).unwrapped
+    blocked, spec = env.radio_map.blocked, env.scenario
+    resolution, per_step = spec.room.resolution, spec.robot.v_max * spec.mission.time_step
+    longest = []
+    for robot in spec.robots:
+        x0, y0, x1, y1 = robot.start
+        cells = [
+            (ix, iy)
+            for ix in range(int(np.ceil(x0 / resolution)), int(x1 / resolution) + 1)
+            for iy in range(int(np.ceil(y0 / resolution)), int(y1 / resolution) + 1)
+            if not blocked[ix, iy]
+        ]
+        metres = max(
+            float(np.max(np.where(np.isfinite(c), c, -1.0)))
+            for c in (grid_costs_to_goal(blocked, resolution, cell)[0] for cell in cells)
+        )
+        longest.append((metres, (metres - spec.robot.arrival_radius) / per_step))
+    env.close()
+    return longest
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="mall")
@@ -101,6 +131,10 @@ def main() -> None:
                 f"  smallest per-mission best - shortest path: NOMA {row['min_difference noma']:+.1f}, "
                 f"OMA {row['min_difference oma']:+.1f}"
             )
+    for robot, (metres, steps) in enumerate(longest_mission(args.scenario)):
+        print(
+            f"\nrobot {robot}: the farthest free cell from its start area is {metres:.1f} m away ({steps:.0f} steps)", end=""
+        )
     print(f"\n({time.perf_counter() - start:.1f} s)")
 
 

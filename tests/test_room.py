@@ -70,7 +70,7 @@ def test_no_room_gives_noma_25_over_oma_with_rayleigh_fading_on_missions_this_sh
     # docs/SCENARIOS.md ("mall calibration"): with Rayleigh fading on every link, the best NOMA split saves at most
     # ~0.33 expected outages per step over the best OMA split at the same positions (one robot at ~6.9 dB, noise-
     # limited; interference only lowers it), so NOMA* - OMA* <= 0.33 x mission time: the 25 MQI bar needs missions
-    # of >= 25 / 0.33 ~ 77 steps, three times this room's (and the paper's) mission length.
+    # of >= 25 / 0.33 ~ 77 steps, 1.7 times this room's 44 (and longer than any shortest path from its start areas).
     scenario = gym.make("NomaRadioMap-v0").unwrapped.scenario
     radio = scenario.radio
     max_power_w = float(dbm_to_watt(scenario.ap.max_power_dbm))

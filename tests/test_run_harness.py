@@ -60,6 +60,19 @@ def test_a_run_never_deletes_another_runs_tensorboard_logs(tmp_path):
     assert len(_events(shared / SPEC.run_id)) == 1
 
 
+def test_a_fresh_start_keeps_the_logs_of_a_run_whose_id_extends_its_own(tmp_path):
+    # e.g. a Table I run ``ddpg_noma_s1_<tag>`` and the tuned ``ddpg_noma_s1_<tag>_tuned`` in one reproduce folder
+    longer = dataclasses.replace(SPEC, tag="tuned")
+    assert longer.run_id.startswith(SPEC.run_id) and longer.run_id != SPEC.run_id
+    run_one(longer, tmp_path)
+    kept = {path: path.read_bytes() for path in _events(tmp_path / "tb" / longer.run_id)}
+    run_one(SPEC, tmp_path)
+    result_path(tmp_path, SPEC).unlink()  # its result gone: the next attempt starts afresh, removing its own logs
+    run_one(SPEC, tmp_path)
+    assert len(kept) == 1 and {path: path.read_bytes() for path in _events(tmp_path / "tb" / longer.run_id)} == kept
+    assert len(_events(tmp_path / "tb" / SPEC.run_id)) == 1
+
+
 def test_a_tensorboard_folder_in_use_is_refused(tmp_path):
     shared = tmp_path / "tb"
     with output_lock(shared, f".{SPEC.run_id}.lock"):  # what another run's claim holds
