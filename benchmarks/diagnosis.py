@@ -13,6 +13,11 @@ policy brings both robots home in >= 95 % of the fixed missions).
 
     python benchmarks/diagnosis.py --configs base no_norm sac --seeds 0 1       # 2 processes
     python benchmarks/diagnosis.py --list                                        # the configurations
+    python benchmarks/diagnosis.py --configs relgoal goal_vec8_gs2_lr2e3 --seeds 0 1 --sooner-than relgoal
+
+With ``--sooner-than CONFIG``: also, per configuration, how much sooner than ``CONFIG`` each seed reached its first
+deterministic 95 % evaluation, in CPU time of the run (CONFIG's over the configuration's), and the mean over the
+seeds where both reached it.
 
 Runs are independent processes (one torch thread each), written to ``<out>/<config>_seed<k>.json`` as they finish;
 finished runs are skipped when the command is repeated, so an interrupted sweep resumes.
@@ -80,15 +85,22 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "vec4": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": -1}},
     "vec4_gs1": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
     "vec8_gs2": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 2}},
+    "vec16_gs2": {"n_envs": 16, "kwargs": {"train_freq": 1, "gradient_steps": 2}},
+    "vec16_gs4": {"n_envs": 16, "kwargs": {"train_freq": 1, "gradient_steps": 4}},
     "vec8_gs1": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
     "vec16_gs1": {"n_envs": 16, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
     "vec2_gs1": {"n_envs": 2, "kwargs": {"train_freq": 1, "gradient_steps": 1}},
     # fewer, larger updates: a minibatch of 512 costs little more than one of 128 on a CPU
     "vec4_gs1_b512": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1, "batch_size": 512}},
     "vec4_gs1_b256": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1, "batch_size": 256}},
+    "vec8_gs1_b256": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 1, "batch_size": 256}},
     # fewer updates, each a larger step
     "vec4_gs1_lr2e3": {"n_envs": 4, "kwargs": {"train_freq": 1, "gradient_steps": 1, "learning_rate": 2e-3}},
     "vec8_gs1_lr2e3": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 1, "learning_rate": 2e-3}},
+    "vec8_gs2_lr2e3": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 2, "learning_rate": 2e-3}},
+    "vec8_gs2_lr3e3": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 2, "learning_rate": 3e-3}},
+    "vec8_gs3_lr2e3": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 3, "learning_rate": 2e-3}},
+    "vec12_gs3_lr2e3": {"n_envs": 12, "kwargs": {"train_freq": 1, "gradient_steps": 3, "learning_rate": 2e-3}},
 }
 #: The same ablations with the goal-conditioned observation: ``goal_<name>``.
 CONFIGS.update(
@@ -270,6 +282,33 @@ def summary_rows(out: str, names: list[str], seeds: list[int]) -> list[str]:
     return rows
 
 
+def _cpu_to_eval95(out: str, name: str, seed: int) -> float | None:
+    """The run's CPU seconds at its first deterministic evaluation >= 95 % (None: not reached, or not run)."""
+    path = os.path.join(out, f"{name}_seed{seed}.json")
+    if not os.path.exists(path):
+        return None
+    with open(path) as f:
+        evals = json.load(f)["evals"]
+    return next((e["cpu_seconds"] for e in evals if e["success"] >= 0.95), None)
+
+
+def sooner_rows(out: str, names: list[str], seeds: list[int], reference: str) -> list[str]:
+    """One Markdown row per configuration: ``reference``'s CPU time to the first 95 % evaluation over the
+    configuration's, per seed (``-``: not reached), and their mean over the seeds where both reached it."""
+    rows = [f"| config | reached 95 % | sooner than {reference}, per seed | mean |", "|---|---|---|---|"]
+    base = {seed: _cpu_to_eval95(out, reference, seed) for seed in seeds}
+    for name in names:
+        if name == reference:
+            continue
+        own = {seed: _cpu_to_eval95(out, name, seed) for seed in seeds}
+        ratios = [base[s] / own[s] if base[s] is not None and own[s] is not None else None for s in seeds]
+        reached = [r for r in ratios if r is not None]
+        mean = f"{np.mean(reached):.2f}x" if reached else "-"
+        cells = " / ".join("-" if r is None else f"{r:.2f}" for r in ratios)
+        rows.append(f"| {name} | {sum(v is not None for v in own.values())} of {len(seeds)} | {cells} | {mean} |")
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--configs", nargs="+", default=["base"], help="configurations to run (see --list)")
@@ -283,12 +322,15 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="results/diagnosis")
     parser.add_argument("--list", action="store_true", help="print the configurations and exit")
+    parser.add_argument(
+        "--sooner-than", metavar="CONFIG", help="also print how much sooner (CPU time) each config reached 95 %% than this one"
+    )
     args = parser.parse_args()
     if args.list:
         for name, config in CONFIGS.items():
             print(f"{name:16s} {config}")
         return
-    unknown = sorted(set(args.configs) - set(CONFIGS))
+    unknown = sorted(set(args.configs) - set(CONFIGS) | ({args.sooner_than} - set(CONFIGS) - {None}))
     if unknown:
         parser.error(f"unknown configuration(s) {unknown}; known: {sorted(CONFIGS)}")
     os.makedirs(args.out, exist_ok=True)
@@ -313,6 +355,8 @@ def main() -> None:
                     flush=True,
                 )
     print("\n".join(summary_rows(args.out, args.configs, args.seeds)))
+    if args.sooner_than:
+        print("\n".join(sooner_rows(args.out, args.configs, args.seeds, args.sooner_than)))
 
 
 if __name__ == "__main__":
