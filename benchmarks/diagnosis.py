@@ -254,6 +254,15 @@ def figures(train_success: list[bool], evals: list[dict[str, Any]], window: int 
     return {"train95": train95, "eval95": eval95, "best_eval_success": best_eval, "episodes": len(s)}
 
 
+def _record(out: str, name: str, seed: int) -> dict[str, Any] | None:
+    """A finished run's record (None: not run)."""
+    path = os.path.join(out, f"{name}_seed{seed}.json")
+    if not os.path.exists(path):
+        return None
+    with open(path) as f:
+        return json.load(f)
+
+
 def summary_rows(out: str, names: list[str], seeds: list[int]) -> list[str]:
     """One Markdown row per configuration: train95 / eval95 per seed, best deterministic success, wall time."""
     rows = [
@@ -261,12 +270,7 @@ def summary_rows(out: str, names: list[str], seeds: list[int]) -> list[str]:
         "|---|---|---|---|---|---|",
     ]
     for name in names:
-        results = []
-        for seed in seeds:
-            path = os.path.join(out, f"{name}_seed{seed}.json")
-            if os.path.exists(path):
-                with open(path) as f:
-                    results.append(json.load(f))
+        results = [r for r in (_record(out, name, seed) for seed in seeds) if r is not None]
         if not results:
             continue
 
@@ -283,13 +287,11 @@ def summary_rows(out: str, names: list[str], seeds: list[int]) -> list[str]:
 
 
 def _cpu_to_eval95(out: str, name: str, seed: int) -> float | None:
-    """The run's CPU seconds at its first deterministic evaluation >= 95 % (None: not reached, or not run)."""
-    path = os.path.join(out, f"{name}_seed{seed}.json")
-    if not os.path.exists(path):
+    """The run's CPU seconds at its ``eval95`` evaluation (None: not reached, or not run)."""
+    record = _record(out, name, seed)
+    if record is None or record["eval95"] is None:
         return None
-    with open(path) as f:
-        evals = json.load(f)["evals"]
-    return next((e["cpu_seconds"] for e in evals if e["success"] >= 0.95), None)
+    return next(e["cpu_seconds"] for e in record["evals"] if e["episode"] == record["eval95"])
 
 
 def sooner_rows(out: str, names: list[str], seeds: list[int], reference: str) -> list[str]:

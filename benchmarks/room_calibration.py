@@ -29,7 +29,8 @@ import gymnasium as gym
 import numpy as np
 
 import noma_radiomap  # noqa: F401  (registers the envs)
-from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, grid_costs_to_goal, mqi_upper_bound
+from noma_radiomap.geometry import grid_distance_field
+from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, mqi_upper_bound
 from sb3_dtdpg.evaluation import evaluate
 
 MIN_PATH_MARGIN = 15.0
@@ -80,21 +81,14 @@ def longest_mission(scenario: str = "mall") -> list[tuple[float, float]]:
         robot can reach, and the steps it takes at ``V_max`` (less the arrival radius)
     """
     env = gym.make("NomaRadioMap-v0", scenario=scenario).unwrapped
-    blocked, spec = env.radio_map.blocked, env.scenario
-    resolution, per_step = spec.room.resolution, spec.robot.v_max * spec.mission.time_step
+    radio_map, spec = env.radio_map, env.scenario
+    per_step = spec.robot.v_max * spec.mission.time_step
     longest = []
-    for robot in spec.robots:
-        x0, y0, x1, y1 = robot.start
-        cells = [
-            (ix, iy)
-            for ix in range(int(np.ceil(x0 / resolution)), int(x1 / resolution) + 1)
-            for iy in range(int(np.ceil(y0 / resolution)), int(y1 / resolution) + 1)
-            if not blocked[ix, iy]
-        ]
-        metres = max(
-            float(np.max(np.where(np.isfinite(c), c, -1.0)))
-            for c in (grid_costs_to_goal(blocked, resolution, cell)[0] for cell in cells)
-        )
+    for robot in range(len(spec.robots)):
+        metres = 0.0
+        for cell in radio_map.start_cells(robot):
+            distances = grid_distance_field(radio_map.blocked, tuple(cell), radio_map.resolution)
+            metres = max(metres, float(distances[np.isfinite(distances)].max()))
         longest.append((metres, (metres - spec.robot.arrival_radius) / per_step))
     env.close()
     return longest
@@ -131,10 +125,9 @@ def main() -> None:
                 f"  smallest per-mission best - shortest path: NOMA {row['min_difference noma']:+.1f}, "
                 f"OMA {row['min_difference oma']:+.1f}"
             )
+    print()
     for robot, (metres, steps) in enumerate(longest_mission(args.scenario)):
-        print(
-            f"\nrobot {robot}: the farthest free cell from its start area is {metres:.1f} m away ({steps:.0f} steps)", end=""
-        )
+        print(f"robot {robot}: the farthest free cell from its start area is {metres:.1f} m away ({steps:.0f} steps)")
     print(f"\n({time.perf_counter() - start:.1f} s)")
 
 
