@@ -61,3 +61,27 @@ def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
     assert paired["train_success"].iloc[0].startswith("25.0 ± ") and paired["test_mqi"].iloc[0].startswith("50.0 ± ")
     summary = paper_task_runs.summary_rows(rows)
     assert list(summary["algo"]) == ["dtdpg", "ddpg"] and list(summary["train_success"].str[:4]) == ["75.0", "50.0"]
+
+
+def test_learner_gap_splits_a_policy_s_mqi_into_its_path_and_its_power_split():
+    # The decomposition of benchmarks/learner_gap.py: the shortest paths with the exact best split lose nothing to
+    # their split; with the radio-blind equal split they lose what the best split on the same positions gains.
+    from noma_radiomap.planners import ShortestPathPlanner
+
+    gap = load_script("learner_gap")
+    env = gym.make("NomaRadioMap-v0", channel="radio_map", multiple_access="noma")
+    records = {}
+    for power in ("best", "equal"):
+        planner = ShortestPathPlanner(power=power)
+        records[power] = []
+        for seed in (10_000, 10_001, 10_002):
+            env.reset(seed=seed)
+            planner.reset(env.unwrapped)
+            records[power].append(gap.run_mission(env, lambda obs, p=planner: p.act(env.unwrapped, obs), seed))
+    for best, equal in zip(records["best"], records["equal"], strict=True):
+        assert best["power_loss"] == 0.0 and best["outage_steps"] == best["outage_best_power"]
+        assert equal["steps"] == best["steps"]  # the same paths
+        assert equal["outage_best_power"] == best["outage_best_power"]
+        assert equal["mqi_best_power"] == pytest.approx(best["mqi"])
+        assert equal["power_loss"] >= 0.0
+    assert sum(r["power_loss"] for r in records["equal"]) > 0.0

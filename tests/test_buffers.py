@@ -3,10 +3,15 @@ import pytest
 from gymnasium import spaces
 from phased_env import PHASE_WEIGHTS, PhasedPointEnv
 from stable_baselines3 import DDPG
+from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
-from sb3_dtdpg.common.buffers import RewardComponentsNStepReplayBuffer, RewardComponentsReplayBuffer
+from sb3_dtdpg.common.buffers import (
+    FastNStepReplayBuffer,
+    RewardComponentsNStepReplayBuffer,
+    RewardComponentsReplayBuffer,
+)
 
 REWARD_COMPONENTS = ("time", "inducing", "qos", "arrival", "success")
 
@@ -178,3 +183,59 @@ def test_component_keys_default_to_the_first_info():
     assert buffer.component_keys == ("b", "a")
     buffer.relabel({"a": 3.0})
     assert buffer.rewards[0, 0] == pytest.approx(3.0)
+
+
+def _fill_episodes(buffers, steps, n_envs, rng):
+    """The same random transitions into every buffer: episodes that end (done) or are cut (time limit) at random."""
+    for _ in range(steps):
+        obs = rng.standard_normal((n_envs, 2)).astype(np.float32)
+        next_obs = rng.standard_normal((n_envs, 2)).astype(np.float32)
+        action = rng.uniform(-1, 1, (n_envs, 1)).astype(np.float32)
+        reward = (rng.standard_normal(n_envs) * 3).astype(np.float32)
+        done = rng.random(n_envs) < 0.1
+        truncated = done & (rng.random(n_envs) < 0.4)
+        infos = [{"TimeLimit.truncated": bool(cut), "reward_components": random_components(rng)} for cut in truncated]
+        for buffer in buffers:
+            buffer.add(obs, next_obs, action, reward, done, infos)
+
+
+@pytest.mark.parametrize(("size", "steps", "n_envs"), [(64, 40, 1), (64, 150, 1), (32, 90, 3)])
+@pytest.mark.parametrize("fast_class", [FastNStepReplayBuffer, RewardComponentsNStepReplayBuffer])
+def test_fast_n_step_sampling_is_sb3_s_bit_for_bit(size, steps, n_envs, fast_class):
+    # Partly filled and wrapped-around buffers, one env and several: the same draws of numpy's generator give the same
+    # batches, every number equal bit for bit (also the sign of a zero), as SB3's NStepReplayBuffer.
+    kwargs = dict(device="cpu", n_envs=n_envs, n_steps=3, gamma=0.95)
+    reference = NStepReplayBuffer(size, OBS_SPACE, ACT_SPACE, **kwargs)
+    fast = fast_class(size, OBS_SPACE, ACT_SPACE, **kwargs)
+    _fill_episodes([reference, fast], steps, n_envs, np.random.default_rng(steps))
+    if fast_class is RewardComponentsNStepReplayBuffer:
+        fast.relabel(dict.fromkeys(REWARD_COMPONENTS, 0.0))  # rewards of another phase...
+        fast.rewards[...] = reference.rewards  # ...then the same rewards again: the buffer's own arrays are read
+    for seed in range(30):
+        np.random.seed(seed)
+        expected = reference.sample(16)
+        next_draw = np.random.randint(1 << 30)
+        np.random.seed(seed)
+        got = fast.sample(16)
+        assert np.random.randint(1 << 30) == next_draw  # the same draws of numpy's generator
+        for name, want, have in zip(expected._fields, expected, got, strict=True):
+            assert have.dtype == want.dtype and have.shape == want.shape, name
+            assert have.numpy().tobytes() == want.numpy().tobytes(), (name, seed)
+
+
+def test_dtdpg_samples_n_step_returns_with_the_fast_buffer_and_the_same_weights():
+    from sb3_dtdpg import DTDPG
+
+    def train(**kwargs):
+        model = DTDPG(
+            "MlpPolicy", "Pendulum-v1", n_steps=3, learning_starts=50, batch_size=32, buffer_size=500, seed=3, **kwargs
+        )
+        model.learn(250)
+        return model
+
+    fast = train()
+    reference = train(replay_buffer_class=NStepReplayBuffer, replay_buffer_kwargs={"n_steps": 3, "gamma": 0.99})
+    assert type(fast.replay_buffer) is FastNStepReplayBuffer
+    assert type(reference.replay_buffer) is NStepReplayBuffer
+    for (name, a), (_, b) in zip(fast.policy.state_dict().items(), reference.policy.state_dict().items(), strict=True):
+        assert a.numpy().tobytes() == b.numpy().tobytes(), name

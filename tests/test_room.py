@@ -11,8 +11,15 @@ import noma_radiomap  # noqa: F401
 from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, mqi_upper_bound, rayleigh_power
 from noma_radiomap.propagation import dbm_to_watt
 from sb3_dtdpg.evaluation import evaluate
-from sb3_dtdpg.experiments.compare import BEST_PLANNER, PLANNERS, SHORTEST_PATH_PLANNER
+from sb3_dtdpg.experiments.compare import (
+    BEST_PLANNER,
+    PLANNERS,
+    SHORTEST_PATH_PLANNER,
+    format_room_margins,
+    room_margins,
+)
 from sb3_dtdpg.experiments.runs import RunSpec, get_budget
+from sb3_dtdpg.experiments.tables import planner_row
 
 MIN_PATH_MARGIN = 15.0  # docs/SCENARIOS.md, "mall calibration": best planner - shortest-path planner (best power), NOMA
 MIN_NOMA_MARGIN = 25.0  # docs/SCENARIOS.md, "mall calibration": best planner NOMA - best planner OMA
@@ -106,3 +113,23 @@ def test_upper_bound_holds_on_every_test_mission(scores, test_missions):
             env.reset(seed=record["seed"])
             bound = mqi_upper_bound(base, base.positions, base.destinations)
             assert record["mqi"] <= bound + 1e-9, (mode, record["seed"], record["mqi"], bound)
+
+
+def test_the_compare_table_prints_the_margins_of_the_default_room(scores):
+    # The line under `sb3-dtdpg compare`'s table: the radio-map margins from its own planner runs, the Rayleigh ones
+    # from the table's rows (here: this module's evaluations of the same planners on the same missions).
+    rows = [
+        planner_row(name, mode, scores["rayleigh", mode, name])
+        for mode in ("noma", "oma")
+        for name in (BEST_PLANNER, SHORTEST_PATH_PLANNER)
+    ]
+    margins = room_margins(rows, get_budget("default"))
+    mqi = {key: result.mqi_mean for key, result in scores.items()}
+    for channel in ("radio_map", "rayleigh"):
+        best = mqi[channel, "noma", BEST_PLANNER]
+        assert margins[f"path {channel}"] == pytest.approx(best - mqi[channel, "noma", SHORTEST_PATH_PLANNER])
+        assert margins[f"noma {channel}"] == pytest.approx(best - mqi[channel, "oma", BEST_PLANNER])
+    assert margins["path radio_map"] >= MIN_PATH_MARGIN and margins["noma radio_map"] >= MIN_NOMA_MARGIN
+    line = format_room_margins(margins)
+    assert f"{margins['path radio_map']:+.1f} / {margins['path rayleigh']:+.1f}" in line
+    assert f"{margins['noma radio_map']:+.1f} / {margins['noma rayleigh']:+.1f}" in line

@@ -1,4 +1,7 @@
-"""Replay buffers that keep the reward components of every transition, so rewards can be relabelled."""
+"""
+Replay buffers: n-step returns gathered in one compiled pass, and buffers that keep the reward components of every
+transition, so rewards can be relabelled.
+"""
 
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -7,6 +10,111 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
+from stable_baselines3.common.type_aliases import ReplayBufferSamples
+from stable_baselines3.common.vec_env import VecNormalize
+
+from noma_radiomap.compiled import compiled
+
+
+@compiled
+def _n_step_samples(
+    observations: np.ndarray,
+    next_observations: np.ndarray,
+    actions: np.ndarray,
+    rewards: np.ndarray,
+    dones: np.ndarray,
+    timeouts: np.ndarray,
+    batch_inds: np.ndarray,
+    env_inds: np.ndarray,
+    n_steps: int,
+    last_valid: int,
+    discounts: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """SB3's ``NStepReplayBuffer._get_samples`` for flat observations, one sample at a time: the same float32
+    operations in the same order (each return is ``((r0 d0 m0 + r1 d1 m1) + r2 d2 m2) ...``)."""
+    batch, size = batch_inds.shape[0], rewards.shape[0]
+    obs = np.empty((batch, observations.shape[2]), observations.dtype)
+    next_obs = np.empty((batch, next_observations.shape[2]), next_observations.dtype)
+    acts = np.empty((batch, actions.shape[2]), actions.dtype)
+    returns = np.empty((batch, 1), np.float32)
+    lengths = np.empty((batch, 1), np.int64)
+    final_dones = np.empty((batch, 1), np.float32)
+    one, zero = np.float32(1.0), np.float32(0.0)
+    for b in range(batch):
+        start, env = batch_inds[b], env_inds[b]
+        # The last stored transition counts as truncated unless it ended its episode (it may precede a stale one)
+        end = n_steps - 1
+        for k in range(n_steps):
+            i = (start + k) % size
+            if dones[i, env] or timeouts[i, env] or (i == last_valid and not dones[i, env]):
+                end = k
+                break
+        total = zero
+        for k in range(n_steps):
+            total += rewards[(start + k) % size, env] * discounts[k] * (one if k <= end else zero)
+        returns[b, 0] = total
+        lengths[b, 0] = end + 1
+        last = (start + end) % size
+        truncated = timeouts[last, env] or (last == last_valid and not dones[last, env])
+        final_dones[b, 0] = (one if dones[last, env] else zero) * (one - (one if truncated else zero))
+        obs[b] = observations[start, env]
+        next_obs[b] = next_observations[last, env]
+        acts[b] = actions[start, env]
+    return obs, next_obs, acts, returns, lengths, final_dones
+
+
+class FastNStepSampling:
+    """
+    Mixin for SB3's ``NStepReplayBuffer`` and its subclasses: the batch and its n-step returns are gathered in one
+    compiled pass, with the same random draws and the same numbers, bit for bit, as SB3's ``_get_samples``
+    (``tests/test_buffers.py``), in about a third of its time. Under ``VecNormalize`` (the samples are normalized)
+    SB3's own method runs.
+    """
+
+    def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> ReplayBufferSamples:
+        buffer: Any = self
+        if env is not None or not isinstance(buffer.observations, np.ndarray):
+            return super()._get_samples(batch_inds, env=env)  # type: ignore[misc]
+        env_indices = np.random.randint(0, buffer.n_envs, size=batch_inds.shape)
+        size, n_envs = buffer.buffer_size, buffer.n_envs
+        obs, next_obs, actions, returns, lengths, final_dones = _n_step_samples(
+            buffer.observations.reshape(size, n_envs, -1),
+            buffer.next_observations.reshape(size, n_envs, -1),
+            buffer.actions.reshape(size, n_envs, -1),
+            buffer.rewards,
+            buffer.dones,
+            buffer.timeouts,
+            batch_inds,
+            env_indices,
+            buffer.n_steps,
+            (buffer.pos - 1) % size,
+            buffer.gamma ** np.arange(buffer.n_steps, dtype=np.float32),
+        )
+        # SB3's expressions, on arrays of the same shapes and types
+        target_q_discounts = buffer.gamma ** lengths.astype(np.float32)
+        return ReplayBufferSamples(
+            observations=th.from_numpy(obs.reshape(-1, *buffer.obs_shape)).to(buffer.device),
+            actions=th.from_numpy(actions.reshape(-1, *buffer.actions.shape[2:])).to(buffer.device),
+            next_observations=th.from_numpy(next_obs.reshape(-1, *buffer.obs_shape)).to(buffer.device),
+            dones=th.from_numpy(final_dones).to(buffer.device),
+            rewards=th.from_numpy(returns).to(buffer.device),
+            discounts=th.from_numpy(target_q_discounts).to(buffer.device),
+        )
+
+
+class FastNStepReplayBuffer(FastNStepSampling, NStepReplayBuffer):
+    """
+    SB3's ``NStepReplayBuffer`` with :class:`FastNStepSampling`: DT-DPG's buffer for ``n_steps > 1`` when no phase
+    relabels the rewards.
+
+    :param args: Arguments of SB3's ``NStepReplayBuffer``
+    :param n_steps: Number of steps summed in a return
+    :param gamma: Discount factor of the n-step sums (the algorithm's ``gamma``)
+    :param kwargs: Keyword arguments of SB3's ``NStepReplayBuffer``
+    """
+
+    def __init__(self, *args: Any, n_steps: int = 3, gamma: float = 0.99, **kwargs: Any):
+        super().__init__(*args, n_steps=n_steps, gamma=gamma, **kwargs)
 
 
 class RewardComponentsReplayBuffer(ReplayBuffer):
@@ -137,9 +245,10 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
         self.reset()
 
 
-class RewardComponentsNStepReplayBuffer(RewardComponentsReplayBuffer, NStepReplayBuffer):
+class RewardComponentsNStepReplayBuffer(FastNStepSampling, RewardComponentsReplayBuffer, NStepReplayBuffer):
     """
-    :class:`RewardComponentsReplayBuffer` with n-step returns (SB3's ``NStepReplayBuffer``).
+    :class:`RewardComponentsReplayBuffer` with n-step returns (SB3's ``NStepReplayBuffer``, sampled by
+    :class:`FastNStepSampling`).
 
     SB3's n-step buffer stores one-step rewards and sums ``n_steps`` of them, discounted by ``gamma``, when it
     samples; :meth:`relabel` rewrites the one-step rewards, so the n-step returns sampled after a relabel are

@@ -3,6 +3,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
 import torch as th
+from gymnasium import spaces
 from stable_baselines3 import DDPG
 from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, EvalCallback
@@ -12,7 +13,7 @@ from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_dtdpg import env_settings
-from sb3_dtdpg.common.buffers import reward_components_buffer
+from sb3_dtdpg.common.buffers import FastNStepReplayBuffer, reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
 from sb3_dtdpg.common.checks import check_folder, check_off_policy_settings, check_total_timesteps
 from sb3_dtdpg.common.noise import decaying_noise
@@ -70,7 +71,9 @@ class DTDPG(LeanStep, DDPG):
     :param replay_buffer_class: Replay buffer class to use (for instance ``HerReplayBuffer``).
         If ``None``: :class:`~sb3_dtdpg.common.buffers.RewardComponentsReplayBuffer` when a phase relabels
         the replay buffer (:class:`~sb3_dtdpg.common.buffers.RewardComponentsNStepReplayBuffer` with
-        ``n_steps > 1``), else SB3's choice.
+        ``n_steps > 1``), else with ``n_steps > 1`` on a ``Box`` observation space
+        :class:`~sb3_dtdpg.common.buffers.FastNStepReplayBuffer` (SB3's ``NStepReplayBuffer``, sampled faster with
+        the same numbers), else SB3's choice.
     :param replay_buffer_kwargs: Keyword arguments to pass to the replay buffer on creation.
     :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer
         at a cost of more complexity.
@@ -185,6 +188,10 @@ class DTDPG(LeanStep, DDPG):
         if self.replay_buffer_class is None and any(phase.replay_handling == "relabel" for phase in self.phases[1:]):
             self.replay_buffer_class, buffer_kwargs = reward_components_buffer(self.n_steps, self.gamma)
             self.replay_buffer_kwargs = {**buffer_kwargs, **self.replay_buffer_kwargs}
+        elif self.replay_buffer_class is None and self.n_steps > 1 and isinstance(self.observation_space, spaces.Box):
+            # SB3's NStepReplayBuffer, sampled faster with the same numbers
+            self.replay_buffer_class = FastNStepReplayBuffer
+            self.replay_buffer_kwargs = {"n_steps": self.n_steps, "gamma": self.gamma, **self.replay_buffer_kwargs}
 
         if _init_setup_model:
             self._setup_model()

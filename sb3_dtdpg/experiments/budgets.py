@@ -67,7 +67,8 @@ class Budget:
 #: home on the test missions (measured, docs/BENCHMARKS.md); ``default`` fits ``compare`` in <= 15 minutes on a
 #: 2-core machine (docs/RESULTS.md); ``mall-200`` and ``small-200`` are the paper's experiments with 200/280
 #: episodes instead of 500/700 on ``mall`` and on ``small`` (``small-200``: what a 2-core machine runs in about an
-#: hour, docs/RESULTS.md); ``paper`` is the paper's scale. ``_micro`` is for the tests.
+#: hour, docs/RESULTS.md); ``paper`` is the paper's scale; ``paper-x4`` four times its training episodes (what the
+#: learners' power split needs, docs/RESULTS.md). ``_micro`` is for the tests.
 BUDGETS: dict[str, Budget] = {
     "_micro": Budget("_micro", episodes=3, long_episodes=4, eval_episodes=2, seeds=2, scenario="small"),
     "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small", paper_task_episodes=3),
@@ -76,6 +77,7 @@ BUDGETS: dict[str, Budget] = {
     "mall-200": Budget("mall-200", episodes=200, long_episodes=280, eval_episodes=20, seeds=3),
     "small-200": Budget("small-200", episodes=200, long_episodes=280, eval_episodes=20, seeds=3, scenario="small"),
     "paper": Budget("paper", episodes=500, long_episodes=700, eval_episodes=20, seeds=5),
+    "paper-x4": Budget("paper-x4", episodes=2000, long_episodes=2800, eval_episodes=20, seeds=5),
 }
 #: The old names, which did not say what they run: ``small`` ran on ``mall``, ``reduced`` on ``small``.
 BUDGET_ALIASES: dict[str, str] = {"small": "mall-200", "reduced": "small-200"}

@@ -17,7 +17,7 @@ import pandas as pd
 
 from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
-__all__ = ["compare_specs", "evaluate_planners", "run_compare"]
+__all__ = ["compare_specs", "evaluate_planners", "format_room_margins", "room_margins", "run_compare"]
 
 #: The reference rows of the tables: label -> (class in :mod:`noma_radiomap.planners`, its keyword arguments).
 PLANNERS: dict[str, tuple[str, dict[str, Any]]] = {
@@ -75,10 +75,16 @@ def evaluate_planners(
     env_id: str = "NomaRadioMap-v0",
     eval_seed: int = 10_000,
     eval_channel: str = "rayleigh",
+    names: Sequence[str] = tuple(PLANNERS),
+    instances: dict[str, Any] | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
     """
     Evaluate the non-learning references on the learners' test missions.
 
+    :param names: the planners of :data:`PLANNERS` to evaluate
+    :param instances: planner objects by name, reused across modes (and across calls, for the caller's dict): the
+        best planner rolls its candidate paths out once per mission (None: a new dict); the random planner is made
+        anew for each mode, with its seed
     :return: the table rows and, per mode, the planners' first test trajectory
     """
     from noma_radiomap import planners
@@ -87,10 +93,15 @@ def evaluate_planners(
 
     rows, trajectories = [], {}
     env_kwargs = {} if budget.scenario is None else {"scenario": budget.scenario}
+    instances = {} if instances is None else instances
     for mode in modes:
         trajectories[mode] = {}
-        for name, (cls, kwargs) in PLANNERS.items():
-            planner = getattr(planners, cls)(**({"seed": eval_seed} if cls == "RandomPlanner" else kwargs))
+        for name in names:
+            cls, kwargs = PLANNERS[name]
+            if cls == "RandomPlanner":
+                planner = planners.RandomPlanner(seed=eval_seed)
+            else:
+                planner = instances.setdefault(name, getattr(planners, cls)(**kwargs))
             result = evaluate(
                 planner,
                 env_id,
@@ -107,6 +118,50 @@ def evaluate_planners(
             rows.append(row)
             trajectories[mode][name] = result.trajectories[0]
     return rows, trajectories
+
+
+def room_margins(
+    rayleigh_rows: Sequence[dict[str, Any]],
+    budget: Budget,
+    env_id: str = "NomaRadioMap-v0",
+    instances: dict[str, Any] | None = None,
+) -> dict[str, float]:
+    """
+    The two margins a room is calibrated for (docs/SCENARIOS.md, "mall calibration") on the test missions: what path
+    design is worth (``path``: best planner - shortest-path planner, NOMA) and what NOMA is worth (``noma``: the best
+    planner's NOMA - its OMA), on the radio-map channel (the planners are evaluated on it here) and with Rayleigh
+    fading (from the rows of the table).
+
+    :param rayleigh_rows: the planners' rows of the table (:func:`evaluate_planners`, NOMA and OMA)
+    :param budget: the budget (its scenario and test missions)
+    :param env_id: the env id
+    :param instances: the planner objects of the table's evaluation (:func:`evaluate_planners`), to reuse
+    :return: ``{"path radio_map", "noma radio_map", "path rayleigh", "noma rayleigh"}``, in MQI
+    """
+    radio_map_rows, _ = evaluate_planners(
+        ("noma", "oma"),
+        budget,
+        env_id,
+        eval_channel="radio_map",
+        names=(BEST_PLANNER, SHORTEST_PATH_PLANNER),
+        instances=instances,
+    )
+    margins = {}
+    for channel, rows in (("radio_map", radio_map_rows), ("rayleigh", rayleigh_rows)):
+        mqi = {(row["algorithm"], row["multiple_access"]): float(row["mqi"]) for row in rows}
+        best = mqi[(BEST_PLANNER, "NOMA")]
+        margins[f"path {channel}"] = best - mqi[(SHORTEST_PATH_PLANNER, "NOMA")]
+        margins[f"noma {channel}"] = best - mqi[(BEST_PLANNER, "OMA")]
+    return margins
+
+
+def format_room_margins(margins: dict[str, float]) -> str:
+    """:return: the line of :func:`room_margins` under the compare table"""
+    return (
+        f"Room margins on these test missions, radio-map channel / Rayleigh fading: path design (best planner - "
+        f"shortest-path planner, NOMA) {margins['path radio_map']:+.1f} / {margins['path rayleigh']:+.1f} MQI, "
+        f"NOMA (the best planner's NOMA - OMA) {margins['noma radio_map']:+.1f} / {margins['noma rayleigh']:+.1f} MQI"
+    )
 
 
 def _finished_line(out: Path) -> Any:
@@ -210,7 +265,8 @@ def run_compare(
         finished = [r for r in results.values() if r is not None]
         records = tables.run_records(finished)
         summary = tables.summarise(records) if not records.empty else pd.DataFrame()
-        planner_rows, planner_paths = evaluate_planners(modes, budget, env_id)
+        planner_instances: dict[str, Any] = {}
+        planner_rows, planner_paths = evaluate_planners(modes, budget, env_id, instances=planner_instances)
         summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
         summary = tables.add_planner_fractions(summary, BEST_PLANNER, SHORTEST_PATH_PLANNER)
         title = (
@@ -220,6 +276,11 @@ def run_compare(
         )
         tables.save_tables(summary, records, out, "results", title)
         tables.print_table(summary, title)
+        if set(modes) == {"noma", "oma"}:
+            margins = format_room_margins(room_margins(planner_rows, budget, env_id, planner_instances))
+            print(margins)
+            with open(out / "results.md", "a") as markdown:
+                markdown.write(f"{margins}.\n")
         if not records.empty:
             plots.plot_statistics(
                 records, out, f"{budget.scenario or 'mall'}, {budget.name} budget ({budget.episodes} episodes)"

@@ -1,0 +1,166 @@
+"""Where the learners lose MQI to the planners: the path they drive or the power split they choose.
+
+For every trained model of a ``compare`` or ``reproduce`` output folder (``<out>/runs/*/model.zip``) and for the two
+reference planners, the test missions are run on the radio-map channel (the channel the learners train on and the
+planners plan on) and, at every step, the exact best power split for the positions the robots actually reached
+(:func:`noma_radiomap.planners.best_power`) is computed. So a policy's MQI splits into
+
+- its **path**: the MQI it would score driving the same positions with the best power split at every step
+  (``MQI + lambda x (outage steps - outage steps with the best split on its path)``), and
+- its **power split**: what it loses against the best split on its own path (``lambda`` x the extra outage steps).
+
+A path scored with the best split can be compared with the planners, whose power split is already the best one:
+above the shortest-path planner, the policy drives a path that uses the radio map better than the shortest one.
+Printed: one row per algorithm and mode, mean and 95 % CI over the seeds (the planners: over the test missions);
+written with ``--csv``: one row per model (or planner) and test mission. Only the radio-map channel: with Rayleigh
+fading a policy sees the faded gains it acts on, so no split computed from the mean gains is a best one for it.
+
+Usage::
+
+    python benchmarks/learner_gap.py results/compare [--episodes 20] [--csv gap.csv]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+
+import noma_radiomap  # noqa: F401  (registers the envs)
+from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, best_power
+from sb3_dtdpg.evaluation import mean_ci
+from sb3_dtdpg.model_files import read_saved_model
+
+#: The reference planners: label -> factory
+PLANNERS = {
+    "best planner": lambda: ReferencePlanner(),
+    "shortest-path planner": lambda: ShortestPathPlanner(power="best"),
+}
+#: The per-mission columns summarised by :func:`summarise`
+COLUMNS = ("mqi", "mqi_best_power", "power_loss", "outage_steps", "outage_best_power", "steps")
+
+
+def run_mission(env: gym.Env, act: Any, seed: int) -> dict[str, float]:
+    """
+    One test mission of a policy, and what the best power split on its positions would have scored.
+
+    :param env: the (wrapped) mission env
+    :param act: ``act(observation) -> action``
+    :param seed: the reset seed of the mission (its destinations and fading)
+    :return: the mission's MQI, outage steps (the policy's and with the best split on its positions), the extra MQI
+        of the best split, and the episode length in steps
+    """
+    observation, _ = env.reset(seed=seed)
+    base: Any = env.unwrapped
+    positions, active, outage, info, done = [], [], 0, {}, False
+    while not done:
+        active.append(~np.asarray(base.arrived, dtype=bool).reshape(-1))
+        observation, _, terminated, truncated, info = env.step(act(observation))
+        positions.append(np.array(base.positions, dtype=np.float64).reshape(-1, 2))
+        outage += int(np.sum(info["outage"]))
+        done = terminated or truncated
+    _, best_outage = best_power(base, np.stack(positions), np.stack(active))
+    penalty = float(base.scenario.mission.outage_penalty)
+    power_loss = penalty * (outage - float(best_outage.sum()))
+    mqi = float(info["mqi"])
+    return {
+        "mqi": mqi,
+        "mqi_best_power": mqi + power_loss,
+        "power_loss": power_loss,
+        "outage_steps": float(outage),
+        "outage_best_power": float(best_outage.sum()),
+        "steps": float(len(positions)),
+    }
+
+
+def _model_env(path: Path) -> tuple[Any, gym.Env, dict[str, Any]]:
+    saved = read_saved_model(path, None)
+    settings = dict(saved.settings or {})
+    kwargs = {k: settings[k] for k in ("scenario", "observation", "multiple_access", "task") if settings.get(k) is not None}
+    env = gym.make(saved.env_id or "NomaRadioMap-v0", channel="radio_map", **kwargs)
+    return saved.load(env), env, {**settings, "algo": saved.algo}
+
+
+def measure(out: Path, episodes: int, seed: int) -> pd.DataFrame:
+    """
+    :return: one row per policy (model or planner) and test mission, with the columns of :func:`run_mission`
+    """
+    rows: list[dict[str, Any]] = []
+    models = sorted(out.glob("runs/*/model.zip"))
+    if not models:
+        raise SystemExit(f"no models in {out}/runs/*/model.zip: give the output folder of compare or reproduce")
+    envs: dict[str, dict[str, Any]] = {}
+    for path in models:
+        model, env, settings = _model_env(path)
+        mode = str(settings.get("multiple_access", "noma"))
+        envs.setdefault(mode, {k: settings[k] for k in ("scenario", "observation", "task") if settings.get(k) is not None})
+        label = {"dtdpg": "DT-DPG", "ddpg": "DDPG"}.get(settings["algo"], settings["algo"])
+        for i in range(episodes):
+            record = run_mission(env, lambda obs, m=model: m.predict(obs, deterministic=True)[0], seed + i)
+            rows.append({"policy": label, "mode": mode, "run": path.parent.name, "episode": i, **record})
+        env.close()
+    for mode, kwargs in envs.items():
+        env = gym.make("NomaRadioMap-v0", channel="radio_map", multiple_access=mode, **kwargs)
+        for label, factory in PLANNERS.items():
+            planner = factory()
+            for i in range(episodes):
+                env.reset(seed=seed + i)
+                planner.reset(env.unwrapped)
+                record = run_mission(env, lambda obs, p=planner, e=env: p.act(e.unwrapped, obs), seed + i)
+                rows.append({"policy": label, "mode": mode, "run": label, "episode": i, **record})
+        env.close()
+    return pd.DataFrame(rows)
+
+
+def summarise(missions: pd.DataFrame) -> pd.DataFrame:
+    """
+    :return: per policy and mode, the mean and 95 % CI of each column, over the runs (seeds) for learners and over
+        the missions for planners; ``vs_shortest``: the path's MQI (best split) minus the shortest-path planner's
+    """
+    rows = []
+    for (policy, mode), group in missions.groupby(["policy", "mode"], sort=False):
+        per_sample = group if policy in PLANNERS else group.groupby("run")[list(COLUMNS)].mean()
+        shortest = missions[(missions.policy == "shortest-path planner") & (missions["mode"] == mode)].mqi.mean()
+        row: dict[str, Any] = {"policy": policy, "mode": mode, "n": len(per_sample)}
+        for column in COLUMNS:
+            row[column], row[f"{column}_ci"] = mean_ci(per_sample[column])
+        row["vs_shortest"] = row["mqi_best_power"] - shortest
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _format(value: float, ci: float) -> str:
+    return f"{value:.1f}" if not np.isfinite(ci) or ci == 0 else f"{value:.1f} ± {ci:.1f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out", type=Path, help="output folder of compare or reproduce (its runs/*/model.zip)")
+    parser.add_argument("--episodes", type=int, default=20, help="test missions (default: 20, as compare)")
+    parser.add_argument("--seed", type=int, default=10_000, help="reset seed of test mission 0 (default: 10000)")
+    parser.add_argument("--csv", type=Path, default=None, help="write one row per policy and mission here")
+    args = parser.parse_args()
+    missions = measure(args.out, args.episodes, args.seed)
+    print(f"radio-map channel, {args.episodes} test missions (mean ± 95 % CI over seeds; planners: over the missions)")
+    print(
+        "| policy | MA | n | MQI | MQI of its path with the best power split | lost to its power split | "
+        "outage steps (with the best split) | steps | its path vs the shortest-path planner |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for _, r in summarise(missions).iterrows():
+        print(
+            f"| {r.policy} | {r['mode'].upper()} | {r.n} | {_format(r.mqi, r.mqi_ci)} | "
+            f"{_format(r.mqi_best_power, r.mqi_best_power_ci)} | {_format(r.power_loss, r.power_loss_ci)} | "
+            f"{r.outage_steps:.1f} ({r.outage_best_power:.1f}) | {r.steps:.1f} | {r.vs_shortest:+.1f} |"
+        )
+    if args.csv is not None:
+        missions.to_csv(args.csv, index=False)
+        print(f"wrote {args.csv}")
+
+
+if __name__ == "__main__":
+    main()
