@@ -8,7 +8,7 @@ import pytest
 
 import noma_radiomap  # noqa: F401
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
-from noma_radiomap.planners import CommAwarePlanner, RandomPlanner, ShortestPathPlanner, channel_maps
+from noma_radiomap.planners import CommAwarePlanner, RandomPlanner, ReferencePlanner, ShortestPathPlanner, channel_maps
 from noma_radiomap.propagation import dbm_to_watt
 from sb3_dtdpg.evaluation import evaluate
 
@@ -174,3 +174,25 @@ def test_shortest_path_power_is_validated():
 
     with pytest.raises(ValueError, match="weights"):
         ReferencePlanner(weights=(0.0,))
+
+
+@pytest.mark.parametrize("planner_cls", [ShortestPathPlanner, CommAwarePlanner, ReferencePlanner])
+def test_a_planner_keeps_the_radio_map_its_cache_is_keyed_on(planner_cls):
+    # The planners cache their fields and paths under the id of the env's radio map. The shared maps live in an LRU
+    # cache: were one evicted and collected, a map of another scenario could take its id and be planned on with the
+    # stale cache. The planner holds the map it planned on, so its id stays taken.
+    import gc
+    import weakref
+
+    from noma_radiomap import radiomap
+
+    env = gym.make("NomaRadioMap-v0", scenario="small")
+    env.reset(seed=0)
+    planner = planner_cls()
+    planner.reset(env.unwrapped)
+    held = weakref.ref(env.unwrapped.radio_map)
+    env.close()
+    del env
+    radiomap._cached_radio_map.cache_clear()
+    gc.collect()
+    assert held() is not None

@@ -130,6 +130,7 @@ class GridPlanner:
         self._paths: list[tuple[np.ndarray, np.ndarray]] = []
         self._expected: np.ndarray | None = None
         self._key: tuple[int, str] | None = None
+        self._radio_map: Any = None  # held while its id is the key: no other map can take that id meanwhile
         self._fields: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
 
     # --- to override -------------------------------------------------------------------------------
@@ -146,7 +147,7 @@ class GridPlanner:
     def _setup(self, env: Any) -> None:
         key = (id(env.radio_map), str(getattr(env, "multiple_access", "")))
         if key != self._key:
-            self._key = key
+            self._key, self._radio_map = key, env.radio_map
             self._fields = {}
             extra = self.extra_cost(env)
             self._extra = extra
@@ -556,6 +557,7 @@ class ReferencePlanner:
         self.weights = tuple(float(w) for w in weights)
         self.lookahead = lookahead
         self._key: int | None = None
+        self._radio_map: Any = None  # held while its id is the key: no other map can take that id meanwhile
         self._plans: dict[tuple[str, bytes], tuple[np.ndarray, np.ndarray, float]] = {}
         self._rollouts: dict[tuple[int, bytes, bytes], list[tuple[np.ndarray, np.ndarray]]] = {}
         self._plan: np.ndarray | None = None
@@ -568,7 +570,7 @@ class ReferencePlanner:
         key = id(env.radio_map)
         if key == self._key:
             return
-        self._key, self._plans, self._rollouts = key, {}, {}
+        self._key, self._radio_map, self._plans, self._rollouts = key, env.radio_map, {}, {}
         penalty = env.scenario.mission.outage_penalty
         self._followers = [_PathFollower(None, self.lookahead)]
         # The same candidates in both modes (a mode's outage map is a useful proxy in the other one).

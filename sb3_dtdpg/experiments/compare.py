@@ -101,7 +101,9 @@ def evaluate_planners(
             if cls == "RandomPlanner":
                 planner = planners.RandomPlanner(seed=eval_seed)
             else:
-                planner = instances.setdefault(name, getattr(planners, cls)(**kwargs))
+                if name not in instances:
+                    instances[name] = getattr(planners, cls)(**kwargs)
+                planner = instances[name]
             result = evaluate(
                 planner,
                 env_id,
