@@ -254,3 +254,7 @@ def test_paired_differences_pair_by_seed_within_a_configuration():
     )
     text = tables.format_paired_markdown(both, ("training", "multiple_access", "learning_rate"))
     assert "| NOMA - OMA | radio_map | - | 0.001 | 4 |" in text and "nan" not in text  # absent columns show "-"
+    # Only one contrast (reproduce --experiments table_ii --multiple-access noma): its own column is in no row
+    alone = tables.paired_differences(records, "training", "radio_map", "rayleigh", by=("multiple_access",))
+    text = tables.format_paired_markdown(alone, ("training", "multiple_access", "learning_rate"))
+    assert "| radio_map - rayleigh | - | NOMA | - | 4 |" in text and "| radio_map - rayleigh | - | OMA | - | 3 |" in text

@@ -154,7 +154,7 @@ def format_paired_markdown(differences: pd.DataFrame, columns: Sequence[str]) ->
     header = ["Contrast", *columns, "Pairs (seeds)", "Success (points)", "Test MQI"]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     for _, row in differences.iterrows():
-        labels = [_label(row[c]) for c in columns]
+        labels = [_label(row.get(c, math.nan)) for c in columns]  # a column no contrast has (one mode, one algorithm)
         cells = [
             str(row["contrast"]),
             *labels,
