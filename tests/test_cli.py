@@ -238,3 +238,23 @@ def test_reproduce_trains_only_the_chosen_experiments(tmp_path, capsys):
         assert result_path(tmp_path, spec).exists() == (spec.run_id in chosen), spec.run_id
     # the other experiments' tables are drawn from the finished runs they share (the radio-map DT-DPG runs)
     assert set(tables["table_ii"]["training"]) == {"radio_map"} and len(tables["ddpg_vs_dtdpg"]) > 4
+
+
+def test_reproduce_reports_one_experiment_in_one_mode(tmp_path):
+    # `reproduce --experiments table_ii --multiple-access noma`: its paired table has only the training contrasts,
+    # so no row has an "approach" label; the report must still be written (it once crashed after all the runs).
+    experiments = reproduce_specs(MICRO, seeds=2)
+    for spec in experiments["table_ii"]:
+        if spec.multiple_access == "noma":
+            path = result_path(tmp_path, spec)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            mqi = 100.0 + spec.seed + (10.0 if spec.channel == "radio_map" else 0.0)
+            path.write_text(json.dumps(_fake_result(spec, mqi=mqi)))
+    tables = run_reproduce(
+        tmp_path, budget="_micro", seeds=2, progress=False, train=False, experiments=["table_ii"], multiple_access=["noma"]
+    )
+    paired = tables["paired"]
+    assert set(paired["contrast"]) == {"radio map E - reality E", "radio map E - reality L"}
+    assert (paired["mqi"] == 10.0).all() and (paired["n"] == 2).all()
+    text = (tmp_path / "paired.md").read_text()
+    assert "| radio map E - reality E | DT-DPG | NOMA | - |" in text
