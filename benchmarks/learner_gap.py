@@ -17,7 +17,11 @@ fading a policy sees the faded gains it acts on, so no split computed from the m
 
 Usage::
 
-    python benchmarks/learner_gap.py results/compare [--episodes 20] [--csv gap.csv]
+    python benchmarks/learner_gap.py results/compare [--episodes 20] [--csv gap.csv] [--figure gap.png]
+    python benchmarks/learner_gap.py --from-csv a.csv b.csv --labels "500 episodes" "2000 episodes" --figure gap.png
+
+The figure draws each learner's MQI with its own split and, stacked on it, what it loses to its split (the top of
+the bar is its path's worth), against the two planners' MQIs, one panel per mode.
 """
 
 from __future__ import annotations
@@ -133,19 +137,82 @@ def summarise(missions: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def plot(frames: dict[str, pd.DataFrame], path: Path) -> None:
+    """
+    :param frames: the missions of :func:`measure` (or their CSV) by label (e.g. the training budget)
+    :param path: where to write the figure
+    """
+    from matplotlib.figure import Figure
+
+    colors = {"DT-DPG": "tab:blue", "DDPG": "tab:orange"}
+    summaries = {label: summarise(missions) for label, missions in frames.items()}
+    modes = [m for m in ("noma", "oma") if any((s["mode"] == m).any() for s in summaries.values())]
+    figure = Figure(figsize=(3.2 + 1.6 * len(frames) * len(modes), 4.6), layout="constrained")
+    axes = figure.subplots(1, len(modes), squeeze=False)[0]
+    for ax, mode in zip(axes, modes, strict=True):
+        x, ticks, names, low = 0.0, [], [], np.inf
+        for label, summary in summaries.items():
+            learners = summary[(summary["mode"] == mode) & ~summary["policy"].isin(list(PLANNERS))]
+            for _, row in learners.iterrows():
+                color = colors.get(row.policy, "tab:gray")
+                ax.bar(x, row.mqi, yerr=row.mqi_ci, color=color, capsize=3)
+                ax.bar(x, row.power_loss, bottom=row.mqi, color=color, alpha=0.3, hatch="//", edgecolor=color)
+                ticks.append(x)
+                names.append(f"{row.policy}\n{label}")
+                low = min(low, row.mqi - row.mqi_ci)
+                x += 1.0
+            x += 0.5
+        planners = next(iter(summaries.values()))
+        planners = planners[planners["mode"] == mode].set_index("policy")
+        for name, style in (("best planner", "-"), ("shortest-path planner", "--")):
+            ax.axhline(planners.loc[name, "mqi"], color="black", linestyle=style, linewidth=1, label=name)
+        top = planners.loc["best planner", "mqi"]
+        ax.set_ylim(low - 0.15 * (top - low), top + 0.1 * (top - low))
+        ax.set_xticks(ticks, names, fontsize=8)
+        ax.set_title(f"{mode.upper()}, radio-map channel")
+    axes[0].set_ylabel("MQI on the test missions")
+    axes[0].bar(np.nan, np.nan, color="gray", label="MQI with its own power split (95 % CI over seeds)")
+    axes[0].bar(np.nan, np.nan, color="gray", alpha=0.3, hatch="//", label="lost to its split (top: its path's worth)")
+    figure.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=2, fontsize=8)
+    figure.savefig(path, dpi=120)
+
+
 def _format(value: float, ci: float) -> str:
     return f"{value:.1f}" if not np.isfinite(ci) or ci == 0 else f"{value:.1f} ± {ci:.1f}"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("out", type=Path, help="output folder of compare or reproduce (its runs/*/model.zip)")
+    parser.add_argument("out", type=Path, nargs="?", help="output folder of compare or reproduce (its runs/*/model.zip)")
     parser.add_argument("--episodes", type=int, default=20, help="test missions (default: 20, as compare)")
     parser.add_argument("--seed", type=int, default=10_000, help="reset seed of test mission 0 (default: 10000)")
     parser.add_argument("--csv", type=Path, default=None, help="write one row per policy and mission here")
+    parser.add_argument("--figure", type=Path, default=None, help="draw the split here (.png)")
+    parser.add_argument("--from-csv", type=Path, nargs="+", default=None, help="CSVs of earlier runs of --csv, instead of out")
+    parser.add_argument("--labels", nargs="+", default=None, help="a label per --from-csv file (default: its name)")
     args = parser.parse_args()
-    missions = measure(args.out, args.episodes, args.seed)
-    print(f"radio-map channel, {args.episodes} test missions (mean ± 95 % CI over seeds; planners: over the missions)")
+    if args.from_csv:
+        labels = args.labels or [path.stem for path in args.from_csv]
+        if len(labels) != len(args.from_csv):
+            parser.error(f"--labels: {len(labels)} labels for {len(args.from_csv)} --from-csv files")
+        frames = {label: pd.read_csv(path) for label, path in zip(labels, args.from_csv, strict=True)}
+    elif args.out is not None:
+        frames = {args.out.name: measure(args.out, args.episodes, args.seed)}
+    else:
+        parser.error("give an output folder of compare or reproduce, or --from-csv")
+    for label, missions in frames.items():
+        _print_summary(label, missions)
+    if args.csv is not None and args.out is not None:
+        next(iter(frames.values())).to_csv(args.csv, index=False)
+        print(f"wrote {args.csv}")
+    if args.figure is not None:
+        plot(frames, args.figure)
+        print(f"wrote {args.figure}")
+
+
+def _print_summary(label: str, missions: pd.DataFrame) -> None:
+    episodes = missions["episode"].nunique()
+    print(f"{label}: radio-map channel, {episodes} test missions (mean ± 95 % CI over seeds; planners: over the missions)")
     print(
         "| policy | MA | n | MQI | MQI of its path with the best power split | lost to its power split | "
         "outage steps (with the best split) | steps | its path vs the shortest-path planner |"
@@ -157,9 +224,6 @@ def main() -> None:
             f"{_format(r.mqi_best_power, r.mqi_best_power_ci)} | {_format(r.power_loss, r.power_loss_ci)} | "
             f"{r.outage_steps:.1f} ({r.outage_best_power:.1f}) | {r.steps:.1f} | {r.vs_shortest:+.1f} |"
         )
-    if args.csv is not None:
-        missions.to_csv(args.csv, index=False)
-        print(f"wrote {args.csv}")
 
 
 if __name__ == "__main__":
