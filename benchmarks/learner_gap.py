@@ -36,7 +36,8 @@ import pandas as pd
 
 import noma_radiomap  # noqa: F401  (registers the envs)
 from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, best_power
-from sb3_dtdpg.evaluation import mean_ci
+from sb3_dtdpg.evaluation import evaluate, mean_ci
+from sb3_dtdpg.experiments.tables import ALGO_LABELS
 from sb3_dtdpg.model_files import read_saved_model
 
 #: The reference planners: label -> factory
@@ -48,37 +49,40 @@ PLANNERS = {
 COLUMNS = ("mqi", "mqi_best_power", "power_loss", "outage_steps", "outage_best_power", "steps")
 
 
-def run_mission(env: gym.Env, act: Any, seed: int) -> dict[str, float]:
+def mission_splits(policy: Any, env: gym.Env, episodes: int, seed: int) -> list[dict[str, float]]:
     """
-    One test mission of a policy, and what the best power split on its positions would have scored.
+    The test missions of a policy (:func:`sb3_dtdpg.evaluation.evaluate`) and what the best power split on the
+    positions it reached would have scored.
 
-    :param env: the (wrapped) mission env
-    :param act: ``act(observation) -> action``
-    :param seed: the reset seed of the mission (its destinations and fading)
-    :return: the mission's MQI, outage steps (the policy's and with the best split on its positions), the extra MQI
+    :param policy: an SB3 model or a planner
+    :param env: the (wrapped) mission env, on the radio-map channel
+    :param episodes: test missions; mission ``i`` is reset with ``seed + i``
+    :param seed: the reset seed of mission 0
+    :return: per mission, its MQI, outage steps (the policy's and with the best split on its positions), the extra MQI
         of the best split, and the episode length in steps
     """
-    observation, _ = env.reset(seed=seed)
+    result = evaluate(policy, env, n_episodes=episodes, seed=seed, return_trajectories=True)
     base: Any = env.unwrapped
-    positions, active, outage, info, done = [], [], 0, {}, False
-    while not done:
-        active.append(~np.asarray(base.arrived, dtype=bool).reshape(-1))
-        observation, _, terminated, truncated, info = env.step(act(observation))
-        positions.append(np.array(base.positions, dtype=np.float64).reshape(-1, 2))
-        outage += int(np.sum(info["outage"]))
-        done = terminated or truncated
-    _, best_outage = best_power(base, np.stack(positions), np.stack(active))
     penalty = float(base.scenario.mission.outage_penalty)
-    power_loss = penalty * (outage - float(best_outage.sum()))
-    mqi = float(info["mqi"])
-    return {
-        "mqi": mqi,
-        "mqi_best_power": mqi + power_loss,
-        "power_loss": power_loss,
-        "outage_steps": float(outage),
-        "outage_best_power": float(best_outage.sum()),
-        "steps": float(len(positions)),
-    }
+    splits = []
+    for record, trajectory in zip(result.episodes, result.trajectories, strict=True):
+        positions = trajectory[1:]  # after each step
+        # A robot transmits (and can be in outage) until the step it arrives, as the planners count it
+        arrival = np.array([record[f"mission_time_{u}"] for u in range(positions.shape[1])])
+        active = np.arange(len(positions))[:, None] < arrival[None, :]
+        _, best_outage = best_power(base, positions, active)
+        power_loss = penalty * (record["outage_steps"] - float(best_outage.sum()))
+        splits.append(
+            {
+                "mqi": record["mqi"],
+                "mqi_best_power": record["mqi"] + power_loss,
+                "power_loss": power_loss,
+                "outage_steps": record["outage_steps"],
+                "outage_best_power": float(best_outage.sum()),
+                "steps": float(record["steps"]),
+            }
+        )
+    return splits
 
 
 def _model_env(path: Path) -> tuple[Any, gym.Env, dict[str, Any]]:
@@ -91,7 +95,7 @@ def _model_env(path: Path) -> tuple[Any, gym.Env, dict[str, Any]]:
 
 def measure(out: Path, episodes: int, seed: int) -> pd.DataFrame:
     """
-    :return: one row per policy (model or planner) and test mission, with the columns of :func:`run_mission`
+    :return: one row per policy (model or planner) and test mission, with the columns of :func:`mission_splits`
     """
     rows: list[dict[str, Any]] = []
     models = sorted(out.glob("runs/*/model.zip"))
@@ -102,20 +106,15 @@ def measure(out: Path, episodes: int, seed: int) -> pd.DataFrame:
         model, env, settings = _model_env(path)
         mode = str(settings.get("multiple_access", "noma"))
         envs.setdefault(mode, {k: settings[k] for k in ("scenario", "observation", "task") if settings.get(k) is not None})
-        label = {"dtdpg": "DT-DPG", "ddpg": "DDPG"}.get(settings["algo"], settings["algo"])
-        for i in range(episodes):
-            record = run_mission(env, lambda obs, m=model: m.predict(obs, deterministic=True)[0], seed + i)
-            rows.append({"policy": label, "mode": mode, "run": path.parent.name, "episode": i, **record})
+        label = ALGO_LABELS.get(settings["algo"], settings["algo"])
+        for i, split in enumerate(mission_splits(model, env, episodes, seed)):
+            rows.append({"policy": label, "mode": mode, "run": path.parent.name, "episode": i, **split})
         env.close()
     for mode, kwargs in envs.items():
         env = gym.make("NomaRadioMap-v0", channel="radio_map", multiple_access=mode, **kwargs)
         for label, factory in PLANNERS.items():
-            planner = factory()
-            for i in range(episodes):
-                env.reset(seed=seed + i)
-                planner.reset(env.unwrapped)
-                record = run_mission(env, lambda obs, p=planner, e=env: p.act(e.unwrapped, obs), seed + i)
-                rows.append({"policy": label, "mode": mode, "run": label, "episode": i, **record})
+            for i, split in enumerate(mission_splits(factory(), env, episodes, seed)):
+                rows.append({"policy": label, "mode": mode, "run": label, "episode": i, **split})
         env.close()
     return pd.DataFrame(rows)
 

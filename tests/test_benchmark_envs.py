@@ -70,14 +70,7 @@ def test_learner_gap_splits_a_policy_s_mqi_into_its_path_and_its_power_split():
 
     gap = load_script("learner_gap")
     env = gym.make("NomaRadioMap-v0", channel="radio_map", multiple_access="noma")
-    records = {}
-    for power in ("best", "equal"):
-        planner = ShortestPathPlanner(power=power)
-        records[power] = []
-        for seed in (10_000, 10_001, 10_002):
-            env.reset(seed=seed)
-            planner.reset(env.unwrapped)
-            records[power].append(gap.run_mission(env, lambda obs, p=planner: p.act(env.unwrapped, obs), seed))
+    records = {power: gap.mission_splits(ShortestPathPlanner(power=power), env, 3, 10_000) for power in ("best", "equal")}
     for best, equal in zip(records["best"], records["equal"], strict=True):
         assert best["power_loss"] == 0.0 and best["outage_steps"] == best["outage_best_power"]
         assert equal["steps"] == best["steps"]  # the same paths

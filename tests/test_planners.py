@@ -178,9 +178,9 @@ def test_shortest_path_power_is_validated():
 
 @pytest.mark.parametrize("planner_cls", [ShortestPathPlanner, CommAwarePlanner, ReferencePlanner])
 def test_a_planner_keeps_the_radio_map_its_cache_is_keyed_on(planner_cls):
-    # The planners cache their fields and paths under the id of the env's radio map. The shared maps live in an LRU
-    # cache: were one evicted and collected, a map of another scenario could take its id and be planned on with the
-    # stale cache. The planner holds the map it planned on, so its id stays taken.
+    # The planners cache their fields and paths for the env's radio map. The shared maps live in an LRU cache: were
+    # one evicted and collected, a map of another scenario could take its id (an id-keyed cache would then be stale).
+    # The planner holds the map it planned on and compares maps by identity.
     import gc
     import weakref
 

@@ -129,8 +129,9 @@ class GridPlanner:
         self.lookahead = lookahead
         self._paths: list[tuple[np.ndarray, np.ndarray]] = []
         self._expected: np.ndarray | None = None
-        self._key: tuple[int, str] | None = None
-        self._radio_map: Any = None  # held while its id is the key: no other map can take that id meanwhile
+        # The radio map and mode the fields and costs were built for (the map itself, not its id, which a later map
+        # could take once this one is collected)
+        self._built_for: tuple[Any, str] | None = None
         self._fields: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
 
     # --- to override -------------------------------------------------------------------------------
@@ -144,10 +145,14 @@ class GridPlanner:
         return np.full(n_robots, 2.0 / n_robots - 1.0)
 
     # --- planning ----------------------------------------------------------------------------------
+    def _stale(self, env: Any) -> bool:
+        """:return: whether the planner was set up for another radio map or mode than the env's"""
+        built = self._built_for
+        return built is None or built[0] is not env.radio_map or built[1] != str(getattr(env, "multiple_access", ""))
+
     def _setup(self, env: Any) -> None:
-        key = (id(env.radio_map), str(getattr(env, "multiple_access", "")))
-        if key != self._key:
-            self._key, self._radio_map = key, env.radio_map
+        if self._stale(env):
+            self._built_for = (env.radio_map, str(getattr(env, "multiple_access", "")))
             self._fields = {}
             extra = self.extra_cost(env)
             self._extra = extra
@@ -291,8 +296,7 @@ class CommAwarePlanner(GridPlanner):
         self.levels = levels
 
     def _setup(self, env: Any) -> None:
-        key = (id(env.radio_map), str(getattr(env, "multiple_access", "")))
-        if key != self._key:
+        if self._stale(env):
             n_robots = env.scenario.n_robots
             levels = self.levels or max(3, min(21, int(2000 ** (1.0 / n_robots))))
             self._grid = np.array(list(itertools.product(np.linspace(-1.0, 1.0, levels), repeat=n_robots)))
@@ -556,8 +560,7 @@ class ReferencePlanner:
             raise ValueError(f"weights must be positive and finite, got {weights!r}")
         self.weights = tuple(float(w) for w in weights)
         self.lookahead = lookahead
-        self._key: int | None = None
-        self._radio_map: Any = None  # held while its id is the key: no other map can take that id meanwhile
+        self._radio_map: Any = None  # the map the candidates were rolled out on
         self._plans: dict[tuple[str, bytes], tuple[np.ndarray, np.ndarray, float]] = {}
         self._rollouts: dict[tuple[int, bytes, bytes], list[tuple[np.ndarray, np.ndarray]]] = {}
         self._plan: np.ndarray | None = None
@@ -567,10 +570,9 @@ class ReferencePlanner:
         self.planned_cost = float("nan")
 
     def _setup(self, env: Any) -> None:
-        key = id(env.radio_map)
-        if key == self._key:
+        if env.radio_map is self._radio_map:
             return
-        self._key, self._radio_map, self._plans, self._rollouts = key, env.radio_map, {}, {}
+        self._radio_map, self._plans, self._rollouts = env.radio_map, {}, {}
         penalty = env.scenario.mission.outage_penalty
         self._followers = [_PathFollower(None, self.lookahead)]
         # The same candidates in both modes (a mode's outage map is a useful proxy in the other one).

@@ -73,7 +73,7 @@ class FastNStepSampling:
 
     def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> ReplayBufferSamples:
         buffer: Any = self
-        if env is not None or not isinstance(buffer.observations, np.ndarray):
+        if env is not None:
             return super()._get_samples(batch_inds, env=env)  # type: ignore[misc]
         env_indices = np.random.randint(0, buffer.n_envs, size=batch_inds.shape)
         size, n_envs = buffer.buffer_size, buffer.n_envs
@@ -104,17 +104,9 @@ class FastNStepSampling:
 
 class FastNStepReplayBuffer(FastNStepSampling, NStepReplayBuffer):
     """
-    SB3's ``NStepReplayBuffer`` with :class:`FastNStepSampling`: DT-DPG's buffer for ``n_steps > 1`` when no phase
-    relabels the rewards.
-
-    :param args: Arguments of SB3's ``NStepReplayBuffer``
-    :param n_steps: Number of steps summed in a return
-    :param gamma: Discount factor of the n-step sums (the algorithm's ``gamma``)
-    :param kwargs: Keyword arguments of SB3's ``NStepReplayBuffer``
+    SB3's ``NStepReplayBuffer`` (the same arguments) with :class:`FastNStepSampling`: DT-DPG's buffer for
+    ``n_steps > 1`` when no phase relabels the rewards.
     """
-
-    def __init__(self, *args: Any, n_steps: int = 3, gamma: float = 0.99, **kwargs: Any):
-        super().__init__(*args, n_steps=n_steps, gamma=gamma, **kwargs)
 
 
 class RewardComponentsReplayBuffer(ReplayBuffer):
