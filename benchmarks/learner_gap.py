@@ -87,10 +87,8 @@ def mission_splits(policy: Any, env: gym.Env, episodes: int, seed: int) -> list[
 
 def _model_env(path: Path) -> tuple[Any, gym.Env, dict[str, Any]]:
     saved = read_saved_model(path, None)
-    settings = dict(saved.settings or {})
-    kwargs = {k: settings[k] for k in ("scenario", "observation", "multiple_access", "task") if settings.get(k) is not None}
-    env = gym.make(saved.env_id or "NomaRadioMap-v0", channel="radio_map", **kwargs)
-    return saved.load(env), env, {**settings, "algo": saved.algo}
+    env = gym.make(saved.env_id or "NomaRadioMap-v0", **saved.env_kwargs("radio_map"))
+    return saved.load(env), env, {**(saved.settings or {}), "algo": saved.algo}
 
 
 def measure(out: Path, episodes: int, seed: int) -> pd.DataFrame:

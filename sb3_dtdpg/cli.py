@@ -394,15 +394,12 @@ def _saved_model_env(args: argparse.Namespace, channel: str, render: bool = Fals
     with _user_errors(args):
         saved = read_saved_model(args.model, args.algo)
         settings = dict(saved.settings or {})
-        kwargs: dict[str, Any] = {"channel": channel}
-        for key, value in (
-            ("scenario", args.scenario or settings.get("scenario")),
-            ("observation", args.observation or settings.get("observation") or "goal"),
-            ("multiple_access", args.multiple_access or settings.get("multiple_access")),
-            ("task", settings.get("task")),
-        ):
-            if value is not None:
-                kwargs[key] = value
+        kwargs = saved.env_kwargs(
+            channel,
+            scenario=args.scenario,
+            observation=args.observation or settings.get("observation") or "goal",
+            multiple_access=args.multiple_access,
+        )
         env_id = args.env or saved.env_id or _DEFAULT_ENV_ID
         env = gym.make(env_id, **kwargs)
         try:

@@ -14,6 +14,9 @@ from typing import Any
 
 __all__ = ["SavedModel", "read_saved_model"]
 
+#: The recorded settings that shape a test env (:meth:`SavedModel.env_kwargs`).
+ENV_KWARGS = ("scenario", "observation", "multiple_access", "task")
+
 #: The algorithm of a policy class name (SB3 stores the policy class in the zip).
 _POLICY_ALGOS = {"DTDPGPolicy": "dtdpg", "TD3Policy": "td3", "SACPolicy": "sac", "TQCPolicy": "tqc"}
 
@@ -41,6 +44,25 @@ class SavedModel:
     ) -> None:
         self.path, self.algo, self.settings, self.env_id, self.source = path, algo, settings, env_id, source
         self.custom_objects = dict(custom_objects or {})
+
+    def env_kwargs(self, channel: str, **overrides: Any) -> dict[str, Any]:
+        """
+        The ``gymnasium.make`` keyword arguments of a test env for this model: its recorded settings that shape the
+        env (``scenario``, ``observation``, ``multiple_access``, ``task``), each replaced by an override that is not
+        None, and the channel.
+
+        :param channel: ``"radio_map"`` or ``"rayleigh"``
+        :param overrides: settings to use instead of the recorded ones (None: the recorded one)
+        :return: the keyword arguments (``channel`` first; settings neither recorded nor given are left out)
+        """
+        settings = self.settings or {}
+        kwargs: dict[str, Any] = {"channel": channel}
+        for key in ENV_KWARGS:
+            value = overrides.get(key)
+            value = settings.get(key) if value is None else value
+            if value is not None:
+                kwargs[key] = value
+        return kwargs
 
     def load(self, env: Any) -> Any:
         """:return: the model, loaded onto ``env`` after checking the env's settings against the recorded ones"""

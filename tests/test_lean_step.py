@@ -14,6 +14,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.envs import FakeImageEnv
 from stable_baselines3.common.noise import NormalActionNoise
 from stable_baselines3.common.save_util import load_from_zip_file
+from stable_baselines3.common.utils import polyak_update
 
 from sb3_dtdpg import DTDPG, Phase
 from sb3_dtdpg.dtdpg.lean import CACHE_ATTRIBUTE, LeanDDPG, LeanTD3, policy_action
@@ -198,6 +199,35 @@ def test_lean_caches_are_not_saved(tmp_path: Path) -> None:
     assert getattr(loaded, CACHE_ATTRIBUTE, None) is None
     loaded.learn(10, reset_num_timesteps=False)  # builds its caches for the loaded networks
     assert getattr(loaded, CACHE_ATTRIBUTE).valid_for(loaded)
+
+
+def test_polyak_on_flat_buffers_follows_the_parameters() -> None:
+    """The targets' Polyak update runs on flat buffers holding the parameters; a parameter given new memory
+    (``.data``, as ``vector_to_parameters`` does) is gathered again, so the targets still follow the online
+    networks as SB3's ``polyak_update`` has them."""
+    model = _small_model(learning_starts=10, batch_size=8, seed=0)
+    model.learn(20)
+    trainer = getattr(model, CACHE_ATTRIBUTE)
+    flat = trainer._flat
+    assert flat is not None
+    online_buffer = flat.buffers[0][0].untyped_storage().data_ptr()
+    assert all(p.untyped_storage().data_ptr() == online_buffer for p in model.critic.parameters())
+    assert all(p.untyped_storage().data_ptr() == online_buffer for p in model.actor.parameters())
+    # The batch-norm statistics stay in their modules' buffers (SB3's lists hold aliases of them)
+    assert all(p.untyped_storage().data_ptr() != online_buffer for p in model.critic.buffers())
+
+    first = next(model.critic.parameters())
+    first.data = first.data.clone() + 1.0
+    expected = [t.clone() for t in model.critic_target.parameters()]
+    polyak_update(list(model.critic.parameters()), expected, model.tau)
+    trainer.polyak(model.tau)
+    assert trainer._flat is not flat and trainer._flat.current()
+    for target, reference in zip(model.critic_target.parameters(), expected, strict=True):
+        assert th.equal(target, reference)
+    # The critic's batch-norm statistics were copied to its target, in the modules
+    for online, target in zip(model.critic.buffers(), model.critic_target.buffers(), strict=True):
+        if online.is_floating_point():
+            assert th.equal(online, target)
 
 
 @pytest.mark.filterwarnings("ignore:`n_steps=3` is ignored")  # SB3's load() of its own n-step DDPG

@@ -144,6 +144,28 @@ def test_settings_of_a_model_without_a_record_come_from_its_run_or_its_observati
     assert saved.settings == {"observation": "paper"} and saved.source == "the observation length"  # 3 x 2 robots
 
 
+def test_the_test_env_of_a_saved_model_has_its_settings_and_the_overrides(saved_dtdpg):
+    from sb3_dtdpg.model_files import read_saved_model
+
+    saved = read_saved_model(saved_dtdpg)
+    kwargs = saved.env_kwargs("rayleigh")
+    assert kwargs == {
+        "channel": "rayleigh",
+        "scenario": "small",
+        "observation": "goal",
+        "multiple_access": "noma",
+        "task": "missions",
+    }
+    env = gym.make("NomaRadioMap-v0", **kwargs)
+    assert saved.load(env).env_settings["scenario"] == "small"  # the recorded settings fit
+    # An override replaces its setting, None keeps the recorded one
+    assert saved.env_kwargs("radio_map", multiple_access="oma", scenario=None) == {
+        **kwargs,
+        "channel": "radio_map",
+        "multiple_access": "oma",
+    }
+
+
 def test_evaluate_is_quiet_about_a_model_saved_with_verbose_on(tmp_path, capsys):
     path = tmp_path / "verbose.zip"
     DTDPG("MlpPolicy", small_env(observation="goal"), seed=0, verbose=1).save(path)  # as the RL Zoo saves its models

@@ -7,10 +7,10 @@ happens here too, in the same order, so the parameters, batch-norm statistics an
 bit-identical to it (``tests/test_lean_step.py``). What is left out is work that changes no number: gradients of
 the critic's weights in the actor loss (:func:`torch.autograd.grad` with respect to the actor's parameters only),
 the per-call bookkeeping of ``Optimizer.step`` (the fused Adam kernel is applied to the optimizer's own state),
-one in-place kernel per tensor in the Polyak updates (``torch._foreach_*``), and the checks and copies of
-``predict`` when acting. For MLP networks on vector observations (DT-DPG's and SB3's own), the forward and
-backward passes run without autograd's graph (:mod:`sb3_dtdpg.dtdpg.backprop`), the same kernels on the same
-tensors.
+one kernel per tensor in the Polyak updates (the parameters live in flat buffers, :class:`FlatPolyak`), and
+the checks and copies of ``predict`` when acting. For MLP networks on vector observations (DT-DPG's and SB3's own),
+the forward and backward passes run without autograd's graph (:mod:`sb3_dtdpg.dtdpg.backprop`), the same kernels on
+the same tensors.
 """
 
 from typing import Any
@@ -21,6 +21,7 @@ from gymnasium import spaces
 from stable_baselines3 import DDPG, TD3
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.preprocessing import is_image_space
+from torch import nn
 from torch.nn import functional as F
 
 from sb3_dtdpg.dtdpg.backprop import BackpropNetworks
@@ -116,6 +117,72 @@ class FusedAdamStep:
             )
 
 
+class FlatPolyak:
+    """
+    Polyak passes of :class:`LeanTrainer` on flat memory: the online and the target parameters of each pass become
+    views of two flat buffers (their ``.data``), so that a pass is one multiply and one add over each buffer instead of
+    one kernel per tensor, the same elementwise operations on the same numbers. Each view starts at a 64-byte boundary,
+    as a tensor of its own does, so every other kernel (the matrix products, batch norm) reads the same memory layout.
+    Only ``nn.Parameter`` objects are moved: they are the modules' own tensors, where SB3's lists of batch-norm
+    statistics hold detached aliases of the modules' buffers (moving an alias would leave its buffer behind).
+
+    :param passes: The passes ``(online, target, copy)`` (``copy``: updated with tau = 1)
+    """
+
+    #: Alignment of each view in the buffers, in bytes (that of torch's CPU allocator)
+    ALIGNMENT = 64
+
+    def __init__(self, passes: list[tuple[list[th.Tensor], list[th.Tensor], bool]]):
+        self.buffers = [(self._gather(online), self._gather(target), copy) for online, target, copy in passes]
+        self.tensors = [t for online, target, _ in passes for t in (*online, *target)]
+        self.pointers = [t.data_ptr() for t in self.tensors]
+
+    @classmethod
+    def of(cls, passes: list[tuple[list[th.Tensor], list[th.Tensor], bool]]) -> "FlatPolyak | None":
+        """:return: the flat passes, or None where the tensors do not allow them (each tensor must be an
+        ``nn.Parameter`` in one pass once, contiguous, on the CPU, of the pass's floating-point dtype, and match its
+        online tensor's shape)"""
+        tensors = [t for online, target, _ in passes for t in (*online, *target)]
+        if not tensors or len({id(t) for t in tensors}) != len(tensors):
+            return None
+        if not all(isinstance(t, nn.Parameter) for t in tensors):
+            return None
+        for online, target, _ in passes:
+            dtype = online[0].dtype if online else None
+            for t in (*online, *target):
+                if t.device.type != "cpu" or not t.is_contiguous() or t.dtype != dtype or not t.is_floating_point():
+                    return None
+            if any(a.shape != b.shape for a, b in zip(online, target, strict=True)):
+                return None
+        return cls(passes)
+
+    @classmethod
+    def _gather(cls, tensors: list[th.Tensor]) -> th.Tensor:
+        """Move the tensors into one new buffer, each a view of it; :return: the buffer"""
+        step = max(1, cls.ALIGNMENT // tensors[0].element_size())
+        offsets, size = [], 0
+        for t in tensors:
+            offsets.append(size)
+            size += -(-t.numel() // step) * step
+        buffer = th.zeros(size, dtype=tensors[0].dtype)
+        for t, offset in zip(tensors, offsets, strict=True):
+            view = buffer[offset : offset + t.numel()].view_as(t)
+            view.copy_(t.detach())
+            t.data = view
+        return buffer
+
+    def current(self) -> bool:
+        """:return: whether every tensor still lives in its buffer"""
+        return all(t.data_ptr() == pointer for t, pointer in zip(self.tensors, self.pointers, strict=True))
+
+    def update(self, tau: float) -> None:
+        """``target = (1 - tau) * target + tau * online`` on each pass's buffers (the statistics: tau = 1)."""
+        for online, target, copy in self.buffers:
+            weight = 1.0 if copy else tau
+            target.mul_(1 - weight)
+            target.add_(online, alpha=weight)
+
+
 class LeanTrainer:
     """
     The tensors and helpers one model's lean step needs, built once per set of networks and optimizers (a new
@@ -134,7 +201,7 @@ class LeanTrainer:
         self.actor_params = self.actor_adam.params
         self.critic_params = self.critic_adam.params
         # SB3 Polyak-updates the critic, then the actor (tau), then copies the critic's and the actor's batch-norm
-        # statistics (tau = 1): one pass of foreach kernels per run of these groups that touches each target once (a
+        # statistics (tau = 1): one pass per run of these groups that touches each target once (a
         # features extractor shared by actor and critic is updated twice, one after the other, as SB3 does)
         groups = [
             (list(model.critic.parameters()), list(model.critic_target.parameters()), False),
@@ -154,6 +221,14 @@ class LeanTrainer:
                 last[1].extend(target)
             else:
                 self.passes.append((list(online), list(target), copy))
+        self._flat: FlatPolyak | None = None
+        self._foreach_passes = self.passes
+        self._flatten()
+
+    def _flatten(self) -> None:
+        """Move the parameters' passes to :class:`FlatPolyak` where it can take them; the others stay foreach passes."""
+        self._flat = FlatPolyak.of([p for p in self.passes if not p[2]])
+        self._foreach_passes = self.passes if self._flat is None else [p for p in self.passes if p[2]]
 
     @staticmethod
     def _owners(model: Any) -> tuple[Any, ...]:
@@ -166,9 +241,14 @@ class LeanTrainer:
 
     def polyak(self, tau: float) -> None:
         """SB3's ``polyak_update`` of the targets (``target = (1 - tau) * target + tau * online``), and the copy of the
-        batch-norm statistics (the same update with ``tau = 1``), one kernel per tensor."""
+        batch-norm statistics (the same update with ``tau = 1``): the parameters on the flat buffers of
+        :class:`FlatPolyak` where it applies, the rest with one foreach kernel over the tensors of each pass."""
         with th.no_grad():
-            for online, target, copy in self.passes:
+            if self._flat is not None and not self._flat.current():
+                self._flatten()  # a parameter was given new memory (``.data``, ``.to()``)
+            if self._flat is not None:
+                self._flat.update(tau)
+            for online, target, copy in self._foreach_passes:
                 weight = 1.0 if copy else tau
                 th._foreach_mul_(target, 1 - weight)
                 th._foreach_add_(target, online, alpha=weight)
