@@ -9,6 +9,11 @@ planners plan on) and, at every step, the exact best power split for the positio
   (``MQI + lambda x (outage steps - outage steps with the best split on its path)``), and
 - its **power split**: what it loses against the best split on its own path (``lambda`` x the extra outage steps).
 
+And of that split: the share of the AP power ``P_max`` it transmits while a robot is under way (the env scales the
+powers down when they ask for more than ``P_max``, never up) and the outage steps its split would have with the
+powers scaled up to the whole ``P_max`` in the same ratio: what it loses by leaving power unused, apart from how it
+divides the power.
+
 A path scored with the best split can be compared with the planners, whose power split is already the best one:
 above the shortest-path planner, the policy drives a path that uses the radio map better than the shortest one.
 Printed: one row per algorithm and mode, mean and 95 % CI over the seeds (the planners: over the test missions);
@@ -35,7 +40,9 @@ import numpy as np
 import pandas as pd
 
 import noma_radiomap  # noqa: F401  (registers the envs)
-from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, best_power
+from noma_radiomap.downlink import downlink, in_outage
+from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, best_power, channel_maps
+from noma_radiomap.propagation import dbm_to_watt
 from sb3_dtdpg.evaluation import evaluate, mean_ci
 from sb3_dtdpg.experiments.tables import ALGO_LABELS
 from sb3_dtdpg.model_files import read_saved_model
@@ -46,7 +53,54 @@ PLANNERS = {
     "shortest-path planner": lambda: ShortestPathPlanner(power="best"),
 }
 #: The per-mission columns summarised by :func:`summarise`
-COLUMNS = ("mqi", "mqi_best_power", "power_loss", "outage_steps", "outage_best_power", "steps")
+COLUMNS = (
+    "mqi",
+    "mqi_best_power",
+    "power_loss",
+    "outage_steps",
+    "outage_best_power",
+    "steps",
+    "power_used",
+    "outage_full_power",
+)
+
+
+class PowerRecorder(gym.Wrapper):
+    """Keeps the transmit powers of every step (``info["power_w"]``), one list per episode."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.episodes: list[list[np.ndarray]] = []
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        self.episodes.append([])
+        return self.env.reset(**kwargs)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self.episodes[-1].append(np.asarray(info["power_w"], dtype=np.float64))
+        return observation, reward, terminated, truncated, info
+
+
+def _full_power_outages(env: Any, positions: np.ndarray, powers: np.ndarray, active: np.ndarray) -> float:
+    """:return: the outage steps of the active robots with each step's powers scaled up to the whole ``P_max`` (the
+    same ratio between the robots), on the radio-map channel"""
+    scenario = env.scenario
+    max_power_w = float(dbm_to_watt(scenario.ap.max_power_dbm))
+    total = powers.sum(axis=1, keepdims=True)
+    scaled = np.where(total > 0, powers * (max_power_w / np.maximum(total, 1e-300)), powers)
+    gain, interference = channel_maps(env)
+    ix, iy = env.radio_map.cell_index(positions)
+    radio = scenario.radio
+    rate = downlink(
+        scaled,
+        gain[ix, iy],
+        interference[ix, iy],
+        radio.bandwidth_per_robot_hz,
+        float(dbm_to_watt(radio.noise_dbm_per_hz)),
+        env.multiple_access,
+    ).rate_bps
+    return float((in_outage(rate, radio.qos_rate_bps) & active).sum())
 
 
 def mission_splits(policy: Any, env: gym.Env, episodes: int, seed: int) -> list[dict[str, float]]:
@@ -59,19 +113,25 @@ def mission_splits(policy: Any, env: gym.Env, episodes: int, seed: int) -> list[
     :param episodes: test missions; mission ``i`` is reset with ``seed + i``
     :param seed: the reset seed of mission 0
     :return: per mission, its MQI, outage steps (the policy's and with the best split on its positions), the extra MQI
-        of the best split, and the episode length in steps
+        of the best split, the episode length in steps, the mean share of ``P_max`` transmitted while a robot is
+        under way, and the outage steps with the policy's powers scaled up to ``P_max``
     """
-    result = evaluate(policy, env, n_episodes=episodes, seed=seed, return_trajectories=True)
+    recorder = PowerRecorder(env)
+    result = evaluate(policy, recorder, n_episodes=episodes, seed=seed, return_trajectories=True)
     base: Any = env.unwrapped
     penalty = float(base.scenario.mission.outage_penalty)
+    max_power_w = float(dbm_to_watt(base.scenario.ap.max_power_dbm))
     splits = []
-    for record, trajectory in zip(result.episodes, result.trajectories, strict=True):
+    for record, trajectory, powers in zip(result.episodes, result.trajectories, recorder.episodes, strict=True):
         positions = trajectory[1:]  # after each step
         # A robot transmits (and can be in outage) until the step it arrives, as the planners count it
         arrival = np.array([record[f"mission_time_{u}"] for u in range(positions.shape[1])])
         active = np.arange(len(positions))[:, None] < arrival[None, :]
         _, best_outage = best_power(base, positions, active)
         power_loss = penalty * (record["outage_steps"] - float(best_outage.sum()))
+        powers = np.array(powers)
+        under_way = active.any(axis=1)
+        used = (powers * active).sum(axis=1)[under_way] / max_power_w
         splits.append(
             {
                 "mqi": record["mqi"],
@@ -80,6 +140,8 @@ def mission_splits(policy: Any, env: gym.Env, episodes: int, seed: int) -> list[
                 "outage_steps": record["outage_steps"],
                 "outage_best_power": float(best_outage.sum()),
                 "steps": float(record["steps"]),
+                "power_used": float(used.mean()),
+                "outage_full_power": _full_power_outages(base, positions, powers, active),
             }
         )
     return splits
@@ -123,11 +185,12 @@ def summarise(missions: pd.DataFrame) -> pd.DataFrame:
         the missions for planners; ``vs_shortest``: the path's MQI (best split) minus the shortest-path planner's
     """
     rows = []
+    columns = [column for column in COLUMNS if column in missions]  # a CSV of an earlier version has fewer
     for (policy, mode), group in missions.groupby(["policy", "mode"], sort=False):
-        per_sample = group if policy in PLANNERS else group.groupby("run")[list(COLUMNS)].mean()
+        per_sample = group if policy in PLANNERS else group.groupby("run")[columns].mean()
         shortest = missions[(missions.policy == "shortest-path planner") & (missions["mode"] == mode)].mqi.mean()
         row: dict[str, Any] = {"policy": policy, "mode": mode, "n": len(per_sample)}
-        for column in COLUMNS:
+        for column in columns:
             row[column], row[f"{column}_ci"] = mean_ci(per_sample[column])
         row["vs_shortest"] = row["mqi_best_power"] - shortest
         rows.append(row)
@@ -210,16 +273,19 @@ def main() -> None:
 def _print_summary(label: str, missions: pd.DataFrame) -> None:
     episodes = missions["episode"].nunique()
     print(f"{label}: radio-map channel, {episodes} test missions (mean ± 95 % CI over seeds; planners: over the missions)")
+    powers = "power_used" in missions
     print(
         "| policy | MA | n | MQI | MQI of its path with the best power split | lost to its power split | "
         "outage steps (with the best split) | steps | its path vs the shortest-path planner |"
+        + (" share of P_max used | outage steps, its split at full power |" if powers else "")
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|" + ("---|---|" if powers else ""))
     for _, r in summarise(missions).iterrows():
         print(
             f"| {r.policy} | {r['mode'].upper()} | {r.n} | {_format(r.mqi, r.mqi_ci)} | "
             f"{_format(r.mqi_best_power, r.mqi_best_power_ci)} | {_format(r.power_loss, r.power_loss_ci)} | "
             f"{r.outage_steps:.1f} ({r.outage_best_power:.1f}) | {r.steps:.1f} | {r.vs_shortest:+.1f} |"
+            + (f" {r.power_used:.2f} | {r.outage_full_power:.1f} |" if powers else "")
         )
 
 

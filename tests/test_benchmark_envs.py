@@ -77,4 +77,10 @@ def test_learner_gap_splits_a_policy_s_mqi_into_its_path_and_its_power_split():
         assert equal["outage_best_power"] == best["outage_best_power"]
         assert equal["mqi_best_power"] == pytest.approx(best["mqi"])
         assert equal["power_loss"] >= 0.0
+        # The best split already transmits the whole P_max; scaling a split up in the same ratio never adds outages
+        assert best["outage_full_power"] == best["outage_steps"]
+        assert equal["outage_full_power"] <= equal["outage_steps"]
+        assert 0.0 < equal["power_used"] <= 1.0
     assert sum(r["power_loss"] for r in records["equal"]) > 0.0
+    # The equal split leaves half of P_max unused once one robot has arrived
+    assert min(r["power_used"] for r in records["equal"]) < 1.0
