@@ -384,7 +384,7 @@ def _run_options(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
-def _saved_model_env(args: argparse.Namespace, channel: str, render: bool = False) -> tuple[Any, Any, dict[str, Any]]:
+def _saved_model_env(args: argparse.Namespace, channel: str) -> tuple[Any, Any, dict[str, Any]]:
     """The saved model of ``evaluate``/``enjoy``, its test env (its recorded settings unless overridden) and the settings."""
     import gymnasium as gym
 

@@ -11,7 +11,7 @@ from tbparse import SummaryReader
 
 from sb3_dtdpg.cli import main
 from sb3_dtdpg.experiments import runs
-from sb3_dtdpg.experiments.compare import compare_specs, run_compare
+from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, compare_specs, run_compare
 from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
 from sb3_dtdpg.experiments.runs import BUDGETS, RunSpec, result_path, run_identity
 
@@ -119,6 +119,13 @@ def test_reproduce_skips_finished_runs(tmp_path):
     assert set(tables["table_ii"]["paper_mqi"]) == {879.5, 868.5, 876.2, 929.0, 919.0}
     comparison = tables["ddpg_vs_dtdpg"].set_index(["algorithm", "multiple_access"])
     assert comparison.loc[("DDPG", "OMA"), "mqi"] == real["eval"]["summary"]["mqi"] != 12345.0
+    # Table II and the learning rates, which have no planner rows, give each row's MQI over the planners' in its mode
+    for name in ("table_ii", "learning_rates"):
+        table = tables[name]
+        for column, planner in (("mqi_of_best", BEST_PLANNER), ("mqi_of_shortest", SHORTEST_PATH_PLANNER)):
+            reference = [comparison.loc[(planner, mode), "mqi"] for mode in table["multiple_access"]]
+            assert np.allclose(table[column], table["mqi"] / reference), (name, column)
+        assert "| of best | of shortest |" in (tmp_path / f"{name}.md").read_text()
     figures = ("fig_maps.png", "fig_reward_learning_rates.png", "fig_mqi_per_episode.png")
     for name in ("table_ii.md", "ddpg_vs_dtdpg.md", "learning_rates.md", "paired.md", *figures):
         assert (tmp_path / name).exists(), name

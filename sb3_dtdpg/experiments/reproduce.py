@@ -247,6 +247,24 @@ def _check_arguments(
         raise ValueError(f"multiple_access: unknown {modes}, expected some of ['noma', 'oma']")
 
 
+class _PlannerRows:
+    """
+    The planners' rows on a budget's test missions (:func:`~sb3_dtdpg.experiments.compare.evaluate_planners`, NOMA
+    and OMA), evaluated on the first call and reused by every table that compares with them.
+
+    :param budget: the budget (its scenario and test missions)
+    """
+
+    def __init__(self, budget: Budget):
+        self.budget = budget
+        self._rows: pd.DataFrame | None = None
+
+    def __call__(self) -> pd.DataFrame:
+        if self._rows is None:
+            self._rows = pd.DataFrame(evaluate_planners(("noma", "oma"), self.budget)[0])
+        return self._rows
+
+
 def run_reproduce(
     out: str | Path = "results/reproduce",
     budget: str | Budget = "tiny",
@@ -315,6 +333,7 @@ def run_reproduce(
             return tables.run_records([results[s.run_id] for s in experiments[name] if results[s.run_id] is not None])
 
         out_tables: dict[str, pd.DataFrame] = {}
+        planners = _PlannerRows(budget)
         # Table II.
         rec = records("table_ii")
         if not rec.empty:
@@ -325,6 +344,7 @@ def run_reproduce(
                 for m, a, n in zip(summary["multiple_access"], summary["approach"], summary["episodes"], strict=False)
             ]
             summary = summary.sort_values(["multiple_access", "training", "episodes"], ascending=[False, True, True])
+            summary = tables.add_planner_fractions(summary, BEST_PLANNER, SHORTEST_PATH_PLANNER, planners())
             tables.save_tables(
                 summary,
                 rec,
@@ -340,8 +360,7 @@ def run_reproduce(
         rec = records("ddpg_vs_dtdpg")
         if not rec.empty:
             summary = tables.summarise(rec)
-            planner_rows, _ = evaluate_planners(("noma", "oma"), budget)
-            summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
+            summary = pd.concat([summary, planners()], ignore_index=True)
             summary = tables.add_planner_fractions(summary, BEST_PLANNER, SHORTEST_PATH_PLANNER)
             title = (
                 f"DDPG vs DT-DPG ({budget.name} budget, {hyperparams} hyperparameters, {observation} observation, "
@@ -357,6 +376,7 @@ def run_reproduce(
         if not rec.empty:
             rec["learning_rate"] = rec["learning_rate"].fillna(base_lr)
             summary = tables.summarise(rec, by=("multiple_access", "learning_rate"))
+            summary = tables.add_planner_fractions(summary, BEST_PLANNER, SHORTEST_PATH_PLANNER, planners())
             tables.save_tables(
                 summary,
                 rec,

@@ -194,20 +194,24 @@ def planner_row(name: str, multiple_access: str, result: EvaluationResult) -> di
     return row
 
 
-def add_planner_fractions(summary: pd.DataFrame, best: str, shortest: str) -> pd.DataFrame:
+def add_planner_fractions(
+    summary: pd.DataFrame, best: str, shortest: str, planners: pd.DataFrame | None = None
+) -> pd.DataFrame:
     """
     Every row's test MQI as a fraction of two planners' in the same mode: ``mqi_of_best`` (the best planner)
     and ``mqi_of_shortest`` (the shortest-path planner); ``mqi_gap`` is ``mqi_bound - mqi`` where a row has an
     upper bound (the best planner's, on the radio-map channel).
 
-    :param summary: a summary with planner rows (``algorithm`` labels ``best`` and ``shortest``)
-    :param best: label of the best planner's rows
+    :param summary: a summary (with the planner rows, unless ``planners`` is given)
+    :param best: label (``algorithm``) of the best planner's rows
     :param shortest: label of the shortest-path planner's rows
+    :param planners: the planner rows on the same test missions, for a summary that has none (e.g. Table II)
     :return: the summary with the new columns (NaN where a mode has no such planner row)
     """
     summary = summary.copy()
+    rows = summary if planners is None else planners
     for column, label in (("mqi_of_best", best), ("mqi_of_shortest", shortest)):
-        reference = summary[summary["algorithm"] == label].set_index("multiple_access")["mqi"]
+        reference = rows[rows["algorithm"] == label].set_index("multiple_access")["mqi"]
         summary[column] = summary["mqi"] / summary["multiple_access"].map(reference).astype(float)
     if "mqi_bound" in summary:
         summary["mqi_gap"] = summary["mqi_bound"] - summary["mqi"]
