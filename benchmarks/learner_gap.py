@@ -167,6 +167,8 @@ def measure(out: Path, episodes: int, seed: int) -> pd.DataFrame:
         mode = str(settings.get("multiple_access", "noma"))
         envs.setdefault(mode, {k: settings[k] for k in ("scenario", "observation", "task") if settings.get(k) is not None})
         label = ALGO_LABELS.get(settings["algo"], settings["algo"])
+        if settings.get("power_mapping", "paper") != "paper":  # benchmarks/power_shares.py's other arm
+            label += f" ({settings['power_mapping']})"
         for i, split in enumerate(mission_splits(model, env, episodes, seed)):
             rows.append({"policy": label, "mode": mode, "run": path.parent.name, "episode": i, **split})
         env.close()

@@ -2,7 +2,7 @@
 
 A policy trained on one observation layout or downlink mode means nothing on another, and two layouts of
 the same length (NOMA and OMA) would load silently. :func:`settings_of` reads the settings of a mission env
-(:data:`SETTINGS`: scenario, observation, multiple_access, channel, task); a model stores them in its
+(:data:`SETTINGS`: scenario, observation, multiple_access, channel, task, power_mapping); a model stores them in its
 ``env_settings`` attribute, which SB3's ``save`` writes into the zip like any other attribute (``DTDPG.save``
 fills it in; :func:`record` does it for any SB3 model). :func:`check_settings` refuses an env whose settings
 differ, naming the ``gymnasium.make`` keyword arguments to use.
@@ -18,9 +18,10 @@ from typing import Any
 __all__ = ["CHECKED", "SETTINGS", "EnvSettingsMismatch", "check_settings", "infer_observation", "record", "settings_of"]
 
 #: What is recorded.
-SETTINGS: tuple[str, ...] = ("scenario", "observation", "multiple_access", "channel", "task")
-#: What must match for a model to be used on an env (the channel may differ: train on the map, test with fading).
-CHECKED: tuple[str, ...] = ("scenario", "observation", "multiple_access", "task")
+SETTINGS: tuple[str, ...] = ("scenario", "observation", "multiple_access", "channel", "task", "power_mapping")
+#: What must match for a model to be used on an env (the channel may differ: train on the map, test with fading; a
+#: model saved before ``power_mapping`` was recorded is not checked for it).
+CHECKED: tuple[str, ...] = ("scenario", "observation", "multiple_access", "task", "power_mapping")
 
 
 class EnvSettingsMismatch(ValueError):
@@ -50,6 +51,18 @@ def _observation_of(env: Any) -> str | None:
     return None
 
 
+def _power_mapping_of(env: Any) -> str:
+    """``"shares"`` behind a :class:`~noma_radiomap.wrappers.PowerShares` wrapper, else the env's own ``"paper"``."""
+    from noma_radiomap.wrappers import PowerShares
+
+    layer = env
+    while layer is not None:
+        if isinstance(layer, PowerShares):
+            return "shares"
+        layer = getattr(layer, "env", None)
+    return "paper"
+
+
 def settings_of(env: Any) -> dict[str, Any] | None:
     """
     :param env: a Gymnasium env, an SB3 ``VecEnv`` or :class:`sb3_dtdpg.vec_env.MissionVecEnv` (or None)
@@ -73,6 +86,7 @@ def settings_of(env: Any) -> dict[str, Any] | None:
         "multiple_access": base.multiple_access,
         "channel": getattr(base, "channel", None),
         "task": getattr(base, "task", None),
+        "power_mapping": _power_mapping_of(single),
     }
 
 
@@ -106,6 +120,8 @@ def infer_observation(n_values: int, n_robots: int) -> str | None:
 def _make_call(settings: dict[str, Any]) -> str:
     keys = ("scenario", "observation", "multiple_access", "task")
     arguments = ", ".join(f"{key}={settings[key]!r}" for key in keys if settings.get(key) is not None)
+    if settings.get("power_mapping", "paper") != "paper":
+        arguments += f", power_mapping={settings['power_mapping']!r}"
     return f'gym.make("NomaRadioMap-v0", {arguments})'
 
 

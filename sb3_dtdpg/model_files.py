@@ -15,7 +15,7 @@ from typing import Any
 __all__ = ["SavedModel", "read_saved_model"]
 
 #: The recorded settings that shape a test env (:meth:`SavedModel.env_kwargs`).
-ENV_KWARGS = ("scenario", "observation", "multiple_access", "task")
+ENV_KWARGS = ("scenario", "observation", "multiple_access", "task", "power_mapping")
 
 #: The algorithm of a policy class name (SB3 stores the policy class in the zip).
 _POLICY_ALGOS = {"DTDPGPolicy": "dtdpg", "TD3Policy": "td3", "SACPolicy": "sac", "TQCPolicy": "tqc"}

@@ -203,6 +203,18 @@ def test_the_observation_is_part_of_a_run():
         run_compare("unused", budget="_micro", observation="relative")
 
 
+def test_the_power_mapping_is_part_of_a_run_and_the_paper_s_keeps_stored_identities():
+    paper = RunSpec("dtdpg", "noma", 0, 3)
+    shares = dataclasses.replace(paper, power_mapping="shares")
+    assert shares.run_id == "dtdpg_noma_s0_goal_shares" and shares.env_kwargs["power_mapping"] == "shares"
+    assert "power_mapping" not in paper.env_kwargs
+    # Runs stored before the setting existed have no power_mapping in their identity: they stay these runs
+    assert "power_mapping" not in run_identity(paper)["spec"]
+    assert run_identity(shares)["spec"]["power_mapping"] == "shares"
+    with pytest.raises(ValueError, match=r"power_mapping must be one of \['paper', 'shares'\], got 'equal'"):
+        run_identity(dataclasses.replace(paper, power_mapping="equal"))
+
+
 def test_a_run_reports_its_progress_while_it_trains(tmp_path, monkeypatch):
     records = []
     write = runs.RunProgress._write

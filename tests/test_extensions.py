@@ -8,7 +8,8 @@ from stable_baselines3 import DDPG
 from stable_baselines3.common.env_util import make_vec_env
 
 from noma_radiomap.planners import ShortestPathPlanner
-from noma_radiomap.wrappers import RelativeGoalObservation
+from noma_radiomap.propagation import dbm_to_watt
+from noma_radiomap.wrappers import RelativeGoalObservation, power_shares
 from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
 from sb3_dtdpg.common.demonstrations import DemonstrationCallback
 
@@ -44,6 +45,30 @@ def test_relative_goal_features_are_zero_once_arrived():
         features = obs[-3 * len(arrived) :].reshape(-1, 3)
         assert np.all(features[arrived] == 0) and np.all(features[~arrived, 2] > 0)
     assert terminated and arrived.all()
+
+
+def test_power_shares_give_the_robots_under_way_the_whole_ap_power():
+    actions = np.array([0.5, 0.0, 0.2, 0.5, 0.0, -0.8], dtype=np.float32)  # asking for 0.6 and 0.1 of P_max
+    powers, positions = {}, {}
+    for mapping in ("paper", "shares"):
+        env = gym.make("NomaRadioMap-v0", power_mapping=mapping)
+        env.reset(seed=0)
+        powers[mapping] = env.step(actions)[4]["power_w"]
+        positions[mapping] = env.unwrapped.positions.copy()
+        max_power = float(dbm_to_watt(env.unwrapped.scenario.ap.max_power_dbm))
+    assert powers["paper"] == pytest.approx(np.array([0.6, 0.1]) * max_power)  # the paper's: 0.3 of P_max unused
+    assert powers["shares"] == pytest.approx(np.array([6.0, 1.0]) / 7.0 * max_power)  # the whole P_max, same ratio
+    assert env.step(np.array([0.5, 0.0, -1.0, 0.5, 0.0, -1.0]))[4]["power_w"].tolist() == [0.0, 0.0]  # nothing asked
+    assert np.array_equal(positions["paper"], positions["shares"])  # the motion components pass unchanged
+    # A NaN power is refused by the env, not turned into "no power"
+    with pytest.raises(ValueError, match="power"):
+        env.step(np.array([0.5, 0.0, np.nan, 0.5, 0.0, 0.0]))
+    # An arrived robot's wish does not count
+    assert power_shares(np.array([0.2, 1.0]), np.array([True, False])) == pytest.approx([1.0, -1.0])
+    with pytest.raises(ValueError, match=r"power_mapping must be one of \['paper', 'shares'\], got 'equal'"):
+        gym.make("NomaRadioMap-v0", power_mapping="equal")
+    with pytest.raises(ValueError, match="the batched env has the paper's mapping only"):
+        gym.make_vec("NomaRadioMap-v0", num_envs=2, power_mapping="shares")
 
 
 # The wrapper itself is what is checked here, so gymnasium's advice to check env.unwrapped does not apply

@@ -41,8 +41,10 @@ def test_settings_of_the_envs():
         "multiple_access": "oma",
         "channel": "radio_map",
         "task": "missions",
+        "power_mapping": "paper",
     }
     assert settings_of(small_env(observation="paper"))["observation"] == "paper"
+    assert settings_of(small_env(power_mapping="shares"))["power_mapping"] == "shares"
     vec = make_mission_vec_env("NomaRadioMap-v0", n_envs=2, seed=0, env_kwargs={"scenario": "small", "observation": "goal"})
     assert settings_of(vec)["observation"] == "goal" and settings_of(vec)["scenario"] == "small"
     assert settings_of(gym.make("Pendulum-v1")) is None
@@ -53,6 +55,7 @@ def test_settings_of_the_envs():
     [
         ({"observation": "paper"}, "observation='goal'"),
         ({"observation": "goal", "multiple_access": "oma"}, "multiple_access='noma'"),
+        ({"observation": "goal", "power_mapping": "shares"}, "power_mapping='paper'"),
     ],
 )
 def test_a_mismatched_env_is_refused_with_the_settings_to_use(saved_dtdpg, kwargs, named):
@@ -155,6 +158,7 @@ def test_the_test_env_of_a_saved_model_has_its_settings_and_the_overrides(saved_
         "observation": "goal",
         "multiple_access": "noma",
         "task": "missions",
+        "power_mapping": "paper",
     }
     env = gym.make("NomaRadioMap-v0", **kwargs)
     assert saved.load(env).env_settings["scenario"] == "small"  # the recorded settings fit

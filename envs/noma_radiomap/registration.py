@@ -24,8 +24,17 @@ from gymnasium.wrappers import TimeLimit
 from noma_radiomap.env import NomaRadioMapEnv
 from noma_radiomap.observations import OBSERVATIONS as _LAYOUTS
 from noma_radiomap.observations import check_observation
+from noma_radiomap.wrappers import PowerShares
 
-__all__ = ["ENV_IDS", "OBSERVATIONS", "check_observation", "make_env", "register_envs"]
+__all__ = [
+    "ENV_IDS",
+    "OBSERVATIONS",
+    "POWER_MAPPINGS",
+    "check_observation",
+    "check_power_mapping",
+    "make_env",
+    "register_envs",
+]
 
 ENTRY_POINT = "noma_radiomap.registration:make_env"
 VECTOR_ENTRY_POINT = "noma_radiomap.vector:make_vec_env"
@@ -41,21 +50,35 @@ ENV_IDS: dict[str, dict[str, str]] = {
     "NomaRadioMapPaperOMA-v0": {"multiple_access": "oma", "channel": "radio_map", "task": "paper"},
 }
 
+#: How the power actions become transmit powers: the env's own mapping (paper Eq. (15e)) or as shares of ``P_max``.
+POWER_MAPPINGS: tuple[str, ...] = ("paper", "shares")
+
 #: The observation layouts (:mod:`noma_radiomap.observations`), the default (``"goal"``) first.
 OBSERVATIONS: tuple[str, ...] = tuple(_LAYOUTS)
 
 
-def make_env(**kwargs: Any) -> gym.Env:
+def make_env(power_mapping: str = "paper", **kwargs: Any) -> gym.Env:
     """
     The entry point of the registered ids: :class:`NomaRadioMapEnv` in a ``TimeLimit`` of its scenario's
     ``mission.max_steps``.
 
+    :param power_mapping: ``"paper"`` (the env's own mapping, paper Eq. (15e)) or ``"shares"`` (the power actions
+        as shares of the whole ``P_max``: :class:`~noma_radiomap.wrappers.PowerShares` around the env)
     :param kwargs: the arguments of :class:`NomaRadioMapEnv` (``observation``: ``"goal"``, the default,
         ``"destinations"`` or ``"paper"``, :mod:`noma_radiomap.observations`; ``task``: ``"missions"`` or ``"paper"``)
     :return: the wrapped env
     """
-    env = NomaRadioMapEnv(**kwargs)
-    return TimeLimit(env, max_episode_steps=env.max_steps)
+    check_power_mapping(power_mapping)
+    env: gym.Env = NomaRadioMapEnv(**kwargs)
+    env = TimeLimit(env, max_episode_steps=env.max_steps)
+    return PowerShares(env) if power_mapping == "shares" else env
+
+
+def check_power_mapping(power_mapping: Any) -> str:
+    """:return: ``power_mapping`` if it is one of :data:`POWER_MAPPINGS`; :raises ValueError: else, naming the value"""
+    if power_mapping not in POWER_MAPPINGS:
+        raise ValueError(f"power_mapping must be one of {list(POWER_MAPPINGS)}, got {power_mapping!r}")
+    return str(power_mapping)
 
 
 # gymnasium.make reads the creator's render modes from here, as it does from an env class

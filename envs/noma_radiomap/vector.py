@@ -345,5 +345,11 @@ def make_vec_env(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
 
     :param num_envs: number of missions
     :param kwargs: the arguments of :class:`NomaRadioMapVecEnv`
+    :raises ValueError: for ``power_mapping="shares"``, a wrapper of the single env only
     """
+    if kwargs.pop("power_mapping", "paper") != "paper":
+        raise ValueError(
+            "power_mapping='shares' wraps the single env (noma_radiomap.wrappers.PowerShares); the batched env has the "
+            "paper's mapping only: use gymnasium.make_vec(..., vectorization_mode='sync') or one env"
+        )
     return NomaRadioMapVecEnv(num_envs=num_envs, **kwargs)

@@ -53,6 +53,9 @@ class RunSpec:
         The run id names it unless it is ``"paper"`` (so the ids of runs stored before the layouts were renamed stay)
     :param overrides: single hyperparameters over the set, ``(name, Python literal)`` pairs (``sb3-dtdpg train
         --hyperparams``; :mod:`sb3_dtdpg.overrides`); a run with overrides gets ``_hp<digest>`` in its id
+    :param power_mapping: how the power actions become powers, in training and in the test
+        (:data:`noma_radiomap.registration.POWER_MAPPINGS`): ``"paper"`` (the env's own) or ``"shares"`` (shares of
+        ``P_max``, :class:`noma_radiomap.wrappers.PowerShares`; the run id ends in ``_shares``)
     """
 
     algo: str
@@ -74,6 +77,7 @@ class RunSpec:
     timesteps: int | None = None
     observation: str = "goal"
     overrides: tuple[tuple[str, str], ...] = ()
+    power_mapping: str = "paper"
 
     @property
     def _suffix(self) -> str:
@@ -82,6 +86,7 @@ class RunSpec:
             + (f"_{self.hyperparams}" if self.hyperparams != "paper" else "")
             + (f"_{self.observation}" if self.observation != "paper" else "")
             + (f"_hp{hashlib.sha256(repr(self.overrides).encode()).hexdigest()[:8]}" if self.overrides else "")
+            + (f"_{self.power_mapping}" if self.power_mapping != "paper" else "")
         )
 
     @property
@@ -107,6 +112,8 @@ class RunSpec:
         if self.inducing is not None:
             kwargs["inducing"] = self.inducing
         kwargs["observation"] = self.observation
+        if self.power_mapping != "paper":
+            kwargs["power_mapping"] = self.power_mapping
         return kwargs
 
 
@@ -169,16 +176,23 @@ def run_identity(spec: RunSpec) -> dict[str, Any]:
     import gymnasium as gym
 
     import noma_radiomap
+    from noma_radiomap.registration import check_power_mapping
     from sb3_dtdpg.baselines import check_hyperparams
 
     check_hyperparams(spec.algo, spec.hyperparams)
+    check_power_mapping(spec.power_mapping)
     scenario = spec.scenario
     if scenario is None:
         scenario = gym.spec(spec.env_id).kwargs.get("scenario", "mall")
     identity = {
         "format": RUN_FORMAT_VERSION,
-        # without overrides the spec is stored as before they existed, so earlier results stay this run's
-        "spec": {k: v for k, v in dataclasses.asdict(spec).items() if k != "overrides" or spec.overrides},
+        # without overrides (with the paper's power mapping) the spec is stored as before they existed, so earlier
+        # results stay this run's
+        "spec": {
+            k: v
+            for k, v in dataclasses.asdict(spec).items()
+            if (k != "overrides" or spec.overrides) and (k != "power_mapping" or spec.power_mapping != "paper")
+        },
         "scenario": noma_radiomap.load_scenario(scenario).to_dict(),
         "hyperparameters": _hyperparameters(spec),
     }
