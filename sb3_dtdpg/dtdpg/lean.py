@@ -119,8 +119,8 @@ class FusedAdamStep:
 
 class FlatPolyak:
     """
-    Polyak passes of :class:`LeanTrainer` on flat memory: the online and the target parameters of each pass become
-    views of two flat buffers (their ``.data``), so that a pass is one multiply and one add over each buffer instead of
+    Polyak passes of :class:`LeanTrainer` on flat memory: the online and the target parameters of each pass (one per
+    network) become views of two flat buffers (their ``.data``), so that a pass is one multiply and one add instead of
     one kernel per tensor, the same elementwise operations on the same numbers. Each view starts at a 64-byte boundary,
     as a tensor of its own does, so every other kernel (the matrix products, batch norm) reads the same memory layout.
     Only ``nn.Parameter`` objects are moved: they are the modules' own tensors, where SB3's lists of batch-norm
@@ -209,6 +209,7 @@ class LeanTrainer:
             (list(model.critic_batch_norm_stats), list(model.critic_batch_norm_stats_target), True),
             (list(model.actor_batch_norm_stats), list(model.actor_batch_norm_stats_target), True),
         ]
+        self.groups = groups
         self.passes: list[tuple[list[th.Tensor], list[th.Tensor], bool]] = []
         for online, target, copy in groups:
             if len(online) != len(target):
@@ -226,8 +227,9 @@ class LeanTrainer:
         self._flatten()
 
     def _flatten(self) -> None:
-        """Move the parameters' passes to :class:`FlatPolyak` where it can take them; the others stay foreach passes."""
-        self._flat = FlatPolyak.of([p for p in self.passes if not p[2]])
+        """Move the parameters to :class:`FlatPolyak` where it can take them, one buffer per network (so that a
+        network's ``state_dict`` saves its own parameters only); the statistics stay foreach passes."""
+        self._flat = FlatPolyak.of([group for group in self.groups if not group[2]])
         self._foreach_passes = self.passes if self._flat is None else [p for p in self.passes if p[2]]
 
     @staticmethod
