@@ -12,6 +12,7 @@ from noma_radiomap.propagation import dbm_to_watt
 from noma_radiomap.wrappers import RelativeGoalObservation, power_shares
 from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
 from sb3_dtdpg.common.demonstrations import DemonstrationCallback
+from sb3_dtdpg.vec_env import make_mission_vec_env
 
 
 def _small(**kwargs) -> gym.Env:
@@ -69,6 +70,8 @@ def test_power_shares_give_the_robots_under_way_the_whole_ap_power():
         gym.make("NomaRadioMap-v0", power_mapping="equal")
     with pytest.raises(ValueError, match="the batched env has the paper's mapping only"):
         gym.make_vec("NomaRadioMap-v0", num_envs=2, power_mapping="shares")
+    with pytest.raises(ValueError, match="the batched env has the paper's mapping only"):
+        make_mission_vec_env("NomaRadioMap-v0", n_envs=2, seed=0, env_kwargs={"power_mapping": "shares"})
 
 
 # The wrapper itself is what is checked here, so gymnasium's advice to check env.unwrapped does not apply

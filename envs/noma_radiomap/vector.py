@@ -118,6 +118,8 @@ class NomaRadioMapVecEnv(VectorEnv):
     :param observation: the observation layout (:mod:`noma_radiomap.observations`; None: ``"goal"``, or
         ``"paper"`` with ``task="paper"``)
     :param task: ``"missions"`` or ``"paper"`` (see :class:`~noma_radiomap.NomaRadioMapEnv`)
+    :param power_mapping: only ``"paper"``, the env's own (``"shares"`` wraps the single env:
+        :class:`~noma_radiomap.wrappers.PowerShares`)
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -137,7 +139,14 @@ class NomaRadioMapVecEnv(VectorEnv):
         render_mode: str | None = None,
         observation: str | None = None,
         task: str = "missions",
+        power_mapping: str = "paper",
     ) -> None:
+        if power_mapping != "paper":
+            raise ValueError(
+                f"power_mapping={power_mapping!r}: the batched env has the paper's mapping only ('shares' wraps the "
+                "single env, noma_radiomap.wrappers.PowerShares); use gymnasium.make_vec(..., vectorization_mode='sync') "
+                "or one env"
+            )
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if render_mode is not None:
@@ -345,11 +354,5 @@ def make_vec_env(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
 
     :param num_envs: number of missions
     :param kwargs: the arguments of :class:`NomaRadioMapVecEnv`
-    :raises ValueError: for ``power_mapping="shares"``, a wrapper of the single env only
     """
-    if kwargs.pop("power_mapping", "paper") != "paper":
-        raise ValueError(
-            "power_mapping='shares' wraps the single env (noma_radiomap.wrappers.PowerShares); the batched env has the "
-            "paper's mapping only: use gymnasium.make_vec(..., vectorization_mode='sync') or one env"
-        )
     return NomaRadioMapVecEnv(num_envs=num_envs, **kwargs)
