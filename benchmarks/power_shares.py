@@ -5,15 +5,16 @@ ask for more than ``P_max`` and never up; with ``power_mapping="shares"``
 (:class:`noma_radiomap.wrappers.PowerShares`) the robots under way always share the whole ``P_max`` in the ratio of
 their ``(a_u + 1) / 2``. ``benchmarks/learner_gap.py`` shows the learners losing most of their distance to the
 shortest-path planner to their power split; this measures what the mapping changes. For each seed and mode, one
-DT-DPG run with each mapping at the budget's scale (the tuned settings and goal observation of ``compare``), tested
-on the 20 Rayleigh test missions of ``compare``; printed: each arm's mean test MQI (95 % t-interval over the seeds),
-the paired difference shares - paper, and the two planners on the same missions. Finished runs are reused, so the
-command can be interrupted and run again.
+DT-DPG run (``--algos``: also DDPG) with each mapping at the budget's scale (the tuned settings and goal observation
+of ``compare``), tested on the 20 Rayleigh test missions of ``compare``; printed: each arm's mean test MQI (95 %
+t-interval over the seeds), the paired difference shares - paper, and the two planners on the same missions.
+Finished runs are reused, so the command can be interrupted and run again.
 
 Usage::
 
     python benchmarks/power_shares.py [--budget paper] [--seeds 5] [--modes noma oma] [--out results/power_shares]
     python benchmarks/power_shares.py --budget paper-x4 --channel rayleigh --modes noma --out results/power_shares_x4
+    python benchmarks/power_shares.py --algos ddpg --out results/power_shares   # the same for plain DDPG
     python benchmarks/learner_gap.py results/power_shares   # where each arm loses: its paths or its split
 """
 
@@ -28,22 +29,25 @@ import pandas as pd
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, compare_specs, evaluate_planners
 from sb3_dtdpg.experiments.runs import RunSpec, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.tables import ALGO_LABELS
 
 #: The two arms: the env's own mapping and the shares
 MAPPINGS = ("paper", "shares")
 
 
-def specs(budget: str, seeds: int, modes: list[str], channel: str = "radio_map") -> list[RunSpec]:
-    """:return: one DT-DPG run per seed, mode and mapping (the runs of ``compare --budget <budget>``, trained on
+def specs(
+    budget: str, seeds: int, modes: list[str], channel: str = "radio_map", algos: tuple[str, ...] = ("dtdpg",)
+) -> list[RunSpec]:
+    """:return: one run per algorithm, seed, mode and mapping (the runs of ``compare --budget <budget>``, trained on
     ``channel``)"""
     base = compare_specs(
-        get_budget(budget), seeds, algos=("dtdpg",), modes=modes, hyperparams="tuned", observation="goal", channel=channel
+        get_budget(budget), seeds, algos=algos, modes=modes, hyperparams="tuned", observation="goal", channel=channel
     )
     return [dataclasses.replace(spec, power_mapping=mapping) for mapping in MAPPINGS for spec in base]
 
 
 def run_rows(out: Path, runs: list[RunSpec]) -> pd.DataFrame:
-    """:return: one row per finished run: mode, mapping, seed, test MQI and success (Rayleigh test missions)"""
+    """:return: one row per finished run: algorithm, mode, mapping, seed, test MQI and success (Rayleigh test missions)"""
     rows = []
     for spec in runs:
         result = load_result(out, spec)
@@ -51,6 +55,7 @@ def run_rows(out: Path, runs: list[RunSpec]) -> pd.DataFrame:
             summary = result["eval"]["summary"]
             rows.append(
                 {
+                    "algo": spec.algo,
                     "multiple_access": spec.multiple_access,
                     "power_mapping": spec.power_mapping,
                     "seed": spec.seed,
@@ -63,33 +68,36 @@ def run_rows(out: Path, runs: list[RunSpec]) -> pd.DataFrame:
 
 
 def summary_lines(rows: pd.DataFrame, planners: dict[tuple[str, str], float], missions: int) -> list[str]:
-    """:return: the markdown table: per mode, each arm's test MQI and the paired difference shares - paper, and the
-    planners' MQI on the ``missions`` test missions"""
+    """:return: the markdown table: per algorithm and mode, each arm's test MQI and the paired difference shares -
+    paper; then the planners' MQI on the ``missions`` test missions"""
     lines = [
-        "| MA | power mapping | seeds | test MQI (Rayleigh) | of best / of shortest | success (%) |",
-        "|---|---|---|---|---|---|",
+        "| algorithm | MA | power mapping | seeds | test MQI (Rayleigh) | of best / of shortest | success (%) |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for mode, group in rows.groupby("multiple_access", sort=False):
+    for (algo, mode), group in rows.groupby(["algo", "multiple_access"], sort=False):
         best, shortest = planners[(BEST_PLANNER, mode.upper())], planners[(SHORTEST_PATH_PLANNER, mode.upper())]
+        label = f"| {ALGO_LABELS.get(algo, algo)} | {mode.upper()} |"
         for mapping in MAPPINGS:
             arm = group[group["power_mapping"] == mapping]
             if arm.empty:
                 continue
             mqi, ci = mean_ci(arm["mqi"])
             lines.append(
-                f"| {mode.upper()} | {mapping} | {len(arm)} | {mqi:.1f} ± {ci:.1f} | {mqi / best:.3f} / "
-                f"{mqi / shortest:.3f} | {100 * arm['success_rate'].mean():.0f} |"
+                f"{label} {mapping} | {len(arm)} | {mqi:.1f} ± {ci:.1f} | {mqi / best:.3f} / {mqi / shortest:.3f} | "
+                f"{100 * arm['success_rate'].mean():.0f} |"
             )
         paired = group.pivot(index="seed", columns="power_mapping", values="mqi").dropna()
         if set(MAPPINGS) <= set(paired.columns) and len(paired):
             difference, ci = mean_ci(paired["shares"] - paired["paper"])
             ahead = int((paired["shares"] > paired["paper"]).sum())
             lines.append(
-                f"| {mode.upper()} | shares - paper, paired | {len(paired)} | {difference:+.1f} ± {ci:.1f} "
+                f"{label} shares - paper, paired | {len(paired)} | {difference:+.1f} ± {ci:.1f} "
                 f"(shares ahead on {ahead} of {len(paired)} seeds) | | |"
             )
+    for mode in rows["multiple_access"].unique():
+        best, shortest = planners[(BEST_PLANNER, mode.upper())], planners[(SHORTEST_PATH_PLANNER, mode.upper())]
         lines.append(
-            f"| {mode.upper()} | best / shortest-path planner | {missions} missions | {best:.1f} / {shortest:.1f} | | |"
+            f"| best / shortest-path planner | {mode.upper()} | | {missions} missions | {best:.1f} / {shortest:.1f} | | |"
         )
     return lines
 
@@ -99,6 +107,7 @@ def main() -> None:
     parser.add_argument("--budget", default="paper", help="budget of the runs (default: paper, 500 episodes)")
     parser.add_argument("--seeds", type=int, default=5, help="seeds per mode and mapping (default: 5)")
     parser.add_argument("--modes", nargs="+", default=["noma", "oma"], choices=["noma", "oma"])
+    parser.add_argument("--algos", nargs="+", default=["dtdpg"], choices=["dtdpg", "ddpg"], help="default: dtdpg")
     parser.add_argument(
         "--channel", default="radio_map", choices=["radio_map", "rayleigh"], help="training channel (default: radio_map)"
     )
@@ -106,7 +115,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2, help="runs at a time (default: 2)")
     parser.add_argument("--csv", type=Path, default=None, help="write one row per run here")
     args = parser.parse_args()
-    runs = specs(args.budget, args.seeds, args.modes, args.channel)
+    runs = specs(args.budget, args.seeds, args.modes, args.channel, tuple(args.algos))
     with output_lock(args.out):
         report = run_many(runs, args.out, n_workers=args.workers)
     for run_id, error in report.failed.items():
