@@ -164,6 +164,11 @@ def _hyperparameters(spec: RunSpec) -> dict[str, Any]:
         env.close()
 
 
+#: Fields added to :class:`RunSpec` after results were stored, with their defaults: a spec at a field's default is
+#: stored without it, as before the field existed, so earlier results stay this run's.
+_LATER_FIELDS: dict[str, Any] = {"overrides": (), "power_mapping": "paper"}
+
+
 def run_identity(spec: RunSpec) -> dict[str, Any]:
     """
     Everything that determines a run's result, as stored in its result file: :data:`RUN_FORMAT_VERSION`, the
@@ -186,13 +191,7 @@ def run_identity(spec: RunSpec) -> dict[str, Any]:
         scenario = gym.spec(spec.env_id).kwargs.get("scenario", "mall")
     identity = {
         "format": RUN_FORMAT_VERSION,
-        # without overrides (with the paper's power mapping) the spec is stored as before they existed, so earlier
-        # results stay this run's
-        "spec": {
-            k: v
-            for k, v in dataclasses.asdict(spec).items()
-            if (k != "overrides" or spec.overrides) and (k != "power_mapping" or spec.power_mapping != "paper")
-        },
+        "spec": {k: v for k, v in dataclasses.asdict(spec).items() if k not in _LATER_FIELDS or v != _LATER_FIELDS[k]},
         "scenario": noma_radiomap.load_scenario(scenario).to_dict(),
         "hyperparameters": _hyperparameters(spec),
     }
