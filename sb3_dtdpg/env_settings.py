@@ -24,6 +24,10 @@ SETTINGS: tuple[str, ...] = ("scenario", "observation", "multiple_access", "chan
 CHECKED: tuple[str, ...] = ("scenario", "observation", "multiple_access", "task", "power_mapping")
 
 
+#: Settings left out of a suggested ``gymnasium.make`` call at these values (the defaults).
+_DEFAULTS: dict[str, Any] = {"power_mapping": "paper"}
+
+
 class EnvSettingsMismatch(ValueError):
     """A model meets an env built with other settings than it was trained with."""
 
@@ -118,10 +122,9 @@ def infer_observation(n_values: int, n_robots: int) -> str | None:
 
 
 def _make_call(settings: dict[str, Any]) -> str:
-    keys = ("scenario", "observation", "multiple_access", "task")
-    arguments = ", ".join(f"{key}={settings[key]!r}" for key in keys if settings.get(key) is not None)
-    if settings.get("power_mapping", "paper") != "paper":
-        arguments += f", power_mapping={settings['power_mapping']!r}"
+    """The ``gymnasium.make`` call of an env with these settings (the paper's power mapping, the default, left out)."""
+    shown = {key: settings.get(key) for key in CHECKED if settings.get(key) not in (None, _DEFAULTS.get(key))}
+    arguments = ", ".join(f"{key}={value!r}" for key, value in shown.items())
     return f'gym.make("NomaRadioMap-v0", {arguments})'
 
 

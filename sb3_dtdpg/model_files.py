@@ -12,10 +12,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SavedModel", "read_saved_model"]
+from sb3_dtdpg.env_settings import CHECKED, check_settings
 
-#: The recorded settings that shape a test env (:meth:`SavedModel.env_kwargs`).
-ENV_KWARGS = ("scenario", "observation", "multiple_access", "task", "power_mapping")
+__all__ = ["SavedModel", "read_saved_model"]
 
 #: The algorithm of a policy class name (SB3 stores the policy class in the zip).
 _POLICY_ALGOS = {"DTDPGPolicy": "dtdpg", "TD3Policy": "td3", "SACPolicy": "sac", "TQCPolicy": "tqc"}
@@ -48,7 +47,7 @@ class SavedModel:
     def env_kwargs(self, channel: str, **overrides: Any) -> dict[str, Any]:
         """
         The ``gymnasium.make`` keyword arguments of a test env for this model: its recorded settings that shape the
-        env (``scenario``, ``observation``, ``multiple_access``, ``task``), each replaced by an override that is not
+        env (:data:`sb3_dtdpg.env_settings.CHECKED`), each replaced by an override that is not
         None, and the channel.
 
         :param channel: ``"radio_map"`` or ``"rayleigh"``
@@ -57,7 +56,7 @@ class SavedModel:
         """
         settings = self.settings or {}
         kwargs: dict[str, Any] = {"channel": channel}
-        for key in ENV_KWARGS:
+        for key in CHECKED:  # the settings that shape the env (the channel is the caller's)
             value = overrides.get(key)
             value = settings.get(key) if value is None else value
             if value is not None:
@@ -67,7 +66,6 @@ class SavedModel:
     def load(self, env: Any) -> Any:
         """:return: the model, loaded onto ``env`` after checking the env's settings against the recorded ones"""
         from sb3_dtdpg.baselines import algorithm_class
-        from sb3_dtdpg.env_settings import check_settings
 
         check_settings(self.settings, env, f"the model {self.path}")
         # verbose 0: a model saved with verbose=1 (the RL Zoo's) would print SB3's env-wrapping notice on load
