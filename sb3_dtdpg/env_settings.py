@@ -13,6 +13,7 @@ fading (the paper's protocol). Envs that are not mission envs have no settings a
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 __all__ = ["CHECKED", "SETTINGS", "EnvSettingsMismatch", "check_settings", "infer_observation", "record", "settings_of"]
@@ -41,17 +42,23 @@ def _single_env(env: Any) -> Any:
     return env
 
 
+def _layers(env: Any) -> Iterator[Any]:
+    """The env and every env behind it, outermost first (Gymnasium wrappers' ``env``, the SB3 face's ``vec_env``)."""
+    layer = env
+    while layer is not None:
+        yield layer
+        layer = getattr(layer, "env", None) or getattr(layer, "vec_env", None)
+
+
 def _observation_of(env: Any) -> str | None:
     """The layout an agent sees: the env's own, or ``goal`` behind a ``RelativeGoalObservation`` wrapper."""
     from noma_radiomap.wrappers import RelativeGoalObservation
 
-    layer = env
-    while layer is not None:
+    for layer in _layers(env):
         if isinstance(layer, RelativeGoalObservation):
             return "goal"
         if isinstance(getattr(layer, "observation", None), str):  # the envs and the batched envs say it themselves
             return layer.observation
-        layer = getattr(layer, "env", None) or getattr(layer, "vec_env", None)
     return None
 
 
@@ -59,12 +66,7 @@ def _power_mapping_of(env: Any) -> str:
     """``"shares"`` behind a :class:`~noma_radiomap.wrappers.PowerShares` wrapper, else the env's own ``"paper"``."""
     from noma_radiomap.wrappers import PowerShares
 
-    layer = env
-    while layer is not None:
-        if isinstance(layer, PowerShares):
-            return "shares"
-        layer = getattr(layer, "env", None)
-    return "paper"
+    return "shares" if any(isinstance(layer, PowerShares) for layer in _layers(env)) else "paper"
 
 
 def settings_of(env: Any) -> dict[str, Any] | None:
