@@ -119,42 +119,43 @@ class FusedAdamStep:
 
 class FlatPolyak:
     """
-    Polyak passes of :class:`LeanTrainer` on flat memory: the online and the target parameters of each pass (one per
-    network) become views of two flat buffers (their ``.data``), so that a pass is one multiply and one add instead of
-    one kernel per tensor, the same elementwise operations on the same numbers. Each view starts at a 64-byte boundary,
-    as a tensor of its own does, so every other kernel (the matrix products, batch norm) reads the same memory layout.
-    Only ``nn.Parameter`` objects are moved: they are the modules' own tensors, where SB3's lists of batch-norm
-    statistics hold detached aliases of the modules' buffers (moving an alias would leave its buffer behind).
+    The Polyak updates of :class:`LeanTrainer` on flat memory: the parameters of each online network and of its target
+    become views of two flat buffers (their ``.data``), so that an update is one multiply and one add per network
+    instead of one kernel per tensor, the same elementwise operations on the same numbers. Each view starts at a
+    64-byte boundary, as a tensor of its own does, so every other kernel (the matrix products, batch norm) reads the
+    same memory layout. Only ``nn.Parameter`` objects are moved: they are the modules' own tensors, where SB3's lists
+    of batch-norm statistics hold detached aliases of the modules' buffers (moving an alias would leave its buffer
+    behind).
 
-    :param passes: The passes ``(online, target, copy)`` (``copy``: updated with tau = 1)
+    :param pairs: per network, its parameters and its target's, in the same order
     """
 
     #: Alignment of each view in the buffers, in bytes (that of torch's CPU allocator)
     ALIGNMENT = 64
 
-    def __init__(self, passes: list[tuple[list[th.Tensor], list[th.Tensor], bool]]):
-        self.buffers = [(self._gather(online), self._gather(target), copy) for online, target, copy in passes]
-        self.tensors = [t for online, target, _ in passes for t in (*online, *target)]
+    def __init__(self, pairs: list[tuple[list[th.Tensor], list[th.Tensor]]]):
+        self.buffers = [(self._gather(online), self._gather(target)) for online, target in pairs]
+        self.tensors = [t for online, target in pairs for t in (*online, *target)]
         self.pointers = [t.data_ptr() for t in self.tensors]
 
     @classmethod
-    def of(cls, passes: list[tuple[list[th.Tensor], list[th.Tensor], bool]]) -> "FlatPolyak | None":
-        """:return: the flat passes, or None where the tensors do not allow them (each tensor must be an
-        ``nn.Parameter`` in one pass once, contiguous, on the CPU, of the pass's floating-point dtype, and match its
+    def of(cls, pairs: list[tuple[list[th.Tensor], list[th.Tensor]]]) -> "FlatPolyak | None":
+        """:return: the flat updates, or None where the tensors do not allow them (each tensor must be an
+        ``nn.Parameter`` in one pair once, contiguous, on the CPU, of its network's floating-point dtype, and match its
         online tensor's shape)"""
-        tensors = [t for online, target, _ in passes for t in (*online, *target)]
-        if not tensors or len({id(t) for t in tensors}) != len(tensors):
+        tensors = [t for online, target in pairs for t in (*online, *target)]
+        if not tensors or len({id(t) for t in tensors}) != len(tensors) or any(not online for online, _ in pairs):
             return None
         if not all(isinstance(t, nn.Parameter) for t in tensors):
             return None
-        for online, target, _ in passes:
-            dtype = online[0].dtype if online else None
+        for online, target in pairs:
+            dtype = online[0].dtype
             for t in (*online, *target):
                 if t.device.type != "cpu" or not t.is_contiguous() or t.dtype != dtype or not t.is_floating_point():
                     return None
             if any(a.shape != b.shape for a, b in zip(online, target, strict=True)):
                 return None
-        return cls(passes)
+        return cls(pairs)
 
     @classmethod
     def _gather(cls, tensors: list[th.Tensor]) -> th.Tensor:
@@ -176,11 +177,10 @@ class FlatPolyak:
         return all(t.data_ptr() == pointer for t, pointer in zip(self.tensors, self.pointers, strict=True))
 
     def update(self, tau: float) -> None:
-        """``target = (1 - tau) * target + tau * online`` on each pass's buffers (the statistics: tau = 1)."""
-        for online, target, copy in self.buffers:
-            weight = 1.0 if copy else tau
-            target.mul_(1 - weight)
-            target.add_(online, alpha=weight)
+        """``target = (1 - tau) * target + tau * online`` on each network's buffers."""
+        for online, target in self.buffers:
+            target.mul_(1 - tau)
+            target.add_(online, alpha=tau)
 
 
 class LeanTrainer:
@@ -229,7 +229,7 @@ class LeanTrainer:
     def _flatten(self) -> None:
         """Move the parameters to :class:`FlatPolyak` where it can take them, one buffer per network (so that a
         network's ``state_dict`` saves its own parameters only); the statistics stay foreach passes."""
-        self._flat = FlatPolyak.of([group for group in self.groups if not group[2]])
+        self._flat = FlatPolyak.of([(online, target) for online, target, copy in self.groups if not copy])
         self._foreach_passes = self.passes if self._flat is None else [p for p in self.passes if p[2]]
 
     @staticmethod
