@@ -40,8 +40,7 @@ import numpy as np
 import pandas as pd
 
 import noma_radiomap  # noqa: F401  (registers the envs)
-from noma_radiomap.downlink import downlink, in_outage
-from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, best_power, channel_maps
+from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, best_power, channel_maps, outages
 from noma_radiomap.propagation import dbm_to_watt
 from sb3_dtdpg.evaluation import evaluate, mean_ci
 from sb3_dtdpg.experiments.tables import ALGO_LABELS
@@ -91,16 +90,7 @@ def _full_power_outages(env: Any, positions: np.ndarray, powers: np.ndarray, act
     scaled = np.where(total > 0, powers * (max_power_w / np.maximum(total, 1e-300)), powers)
     gain, interference = channel_maps(env)
     ix, iy = env.radio_map.cell_index(positions)
-    radio = scenario.radio
-    rate = downlink(
-        scaled,
-        gain[ix, iy],
-        interference[ix, iy],
-        radio.bandwidth_per_robot_hz,
-        float(dbm_to_watt(radio.noise_dbm_per_hz)),
-        env.multiple_access,
-    ).rate_bps
-    return float((in_outage(rate, radio.qos_rate_bps) & active).sum())
+    return float(outages(scaled, gain[ix, iy], interference[ix, iy], active, scenario, env.multiple_access).sum())
 
 
 def mission_splits(policy: Any, env: gym.Env, episodes: int, seed: int) -> list[dict[str, float]]:

@@ -45,6 +45,7 @@ __all__ = [
     "grid_costs_to_goal",
     "min_outage_power",
     "mqi_upper_bound",
+    "outages",
 ]
 
 
@@ -421,16 +422,33 @@ def min_outage_power(
     total = best_power.sum(axis=1, keepdims=True)
     best_power = np.where(total > 0, best_power * (max_power_w / np.maximum(total, 1e-300)), best_power)
     actions = np.clip(np.where(active, 2.0 * best_power / max_power_w - 1.0, -1.0), -1.0, 1.0)
+    return actions, outages(allocate_power(actions, max_power_w), gain, interference_w, active, scenario, multiple_access)
+
+
+def outages(
+    power_w: np.ndarray,
+    gain: np.ndarray,
+    interference_w: np.ndarray,
+    active: np.ndarray,
+    scenario: Any,
+    multiple_access: str,
+) -> np.ndarray:
+    """
+    How many active robots are in outage with these transmit powers (the env's downlink,
+    :func:`~noma_radiomap.downlink.downlink`, and :func:`~noma_radiomap.downlink.in_outage`).
+
+    :param power_w: transmit powers, shape (T, U)
+    :param gain: linear AP gains, shape (T, U)
+    :param interference_w: interference powers, shape (T, U)
+    :param active: robots that have not arrived, bool (T, U)
+    :param scenario: the scenario (its radio constants)
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :return: the number of active robots in outage, shape (T,)
+    """
     radio = scenario.radio
-    rate = downlink(
-        allocate_power(actions, max_power_w),
-        gain,
-        interference_w,
-        radio.bandwidth_per_robot_hz,
-        float(dbm_to_watt(radio.noise_dbm_per_hz)),
-        multiple_access,
-    ).rate_bps
-    return actions, (in_outage(rate, radio.qos_rate_bps) & active).sum(axis=1)
+    noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
+    rate = downlink(power_w, gain, interference_w, radio.bandwidth_per_robot_hz, noise_w_per_hz, multiple_access).rate_bps
+    return (in_outage(rate, radio.qos_rate_bps) & active).sum(axis=1)
 
 
 def single_outage_maps(env: Any, multiple_access: str | None = None) -> tuple[np.ndarray, np.ndarray]:
