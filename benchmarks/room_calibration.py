@@ -30,8 +30,9 @@ import numpy as np
 
 import noma_radiomap  # noqa: F401  (registers the envs)
 from noma_radiomap.geometry import grid_distance_field
-from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, mqi_upper_bound
+from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner
 from sb3_dtdpg.evaluation import evaluate
+from sb3_dtdpg.experiments.compare import mission_bound
 
 MIN_PATH_MARGIN = 15.0
 MIN_NOMA_MARGIN = 25.0
@@ -62,11 +63,7 @@ def measure(scenario: str = "mall", episodes: int = 20, seed: int = 10_000) -> d
                     b["mqi"] - s["mqi"] for b, s in zip(results["best"].episodes, results["shortest"].episodes, strict=True)
                 ]
                 row[f"min_difference {mode}"] = float(min(differences))
-                base, bounds = env.unwrapped, []
-                for episode in range(episodes):
-                    env.reset(seed=seed + episode)
-                    bounds.append(mqi_upper_bound(base, base.positions, base.destinations))
-                row[f"bound {mode}"] = float(np.mean(bounds))
+                row[f"bound {mode}"] = mission_bound("NomaRadioMap-v0", mode, episodes, seed, {"scenario": scenario})
             env.close()
         row["path_margin"] = row["best noma"] - row["shortest noma"]
         row["noma_margin"] = row["best noma"] - row["best oma"]
