@@ -21,6 +21,7 @@ DDPG vs DT-DPG. A run whose result file exists is not re-run, so the job can be 
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -247,24 +248,6 @@ def _check_arguments(
         raise ValueError(f"multiple_access: unknown {modes}, expected some of ['noma', 'oma']")
 
 
-class _PlannerRows:
-    """
-    The planners' rows on a budget's test missions (:func:`~sb3_dtdpg.experiments.compare.evaluate_planners`, NOMA
-    and OMA), evaluated on the first call and reused by every table that compares with them.
-
-    :param budget: the budget (its scenario and test missions)
-    """
-
-    def __init__(self, budget: Budget):
-        self.budget = budget
-        self._rows: pd.DataFrame | None = None
-
-    def __call__(self) -> pd.DataFrame:
-        if self._rows is None:
-            self._rows = pd.DataFrame(evaluate_planners(("noma", "oma"), self.budget)[0])
-        return self._rows
-
-
 def run_reproduce(
     out: str | Path = "results/reproduce",
     budget: str | Budget = "tiny",
@@ -333,7 +316,8 @@ def run_reproduce(
             return tables.run_records([results[s.run_id] for s in experiments[name] if results[s.run_id] is not None])
 
         out_tables: dict[str, pd.DataFrame] = {}
-        planners = _PlannerRows(budget)
+        # The planners on the test missions, evaluated once for every table that compares with them
+        planners = functools.cache(lambda: pd.DataFrame(evaluate_planners(("noma", "oma"), budget)[0]))
         # Table II.
         rec = records("table_ii")
         if not rec.empty:
