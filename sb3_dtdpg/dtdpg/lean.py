@@ -222,8 +222,6 @@ class LeanTrainer:
                 last[1].extend(target)
             else:
                 self.passes.append((list(online), list(target), copy))
-        self._flat: FlatPolyak | None = None
-        self._foreach_passes = self.passes
         self._flatten()
 
     def _flatten(self) -> None:
