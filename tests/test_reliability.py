@@ -91,6 +91,21 @@ def test_a_result_of_another_run_is_refused(tmp_path, change, pattern):
         load_result(tmp_path, spec)
 
 
+@pytest.mark.parametrize("stored", [{"lean": False, "backprop": False}, {}], ids=["switched_off", "before_they_existed"])
+def test_the_lean_step_switches_do_not_make_another_run(tmp_path, stored):
+    """lean/backprop give the same weights bit for bit: a result stored with them off, or before they existed, is this run's."""
+    spec = RunSpec("dtdpg", "noma", 0, 3, scenario="small")
+    identity = run_identity(spec)
+    assert identity["hyperparameters"]["lean"] is True and identity["hyperparameters"]["backprop"] is True
+    hyperparameters = {k: v for k, v in identity["hyperparameters"].items() if k not in ("lean", "backprop")}
+    _store(tmp_path, spec, identity={**identity, "hyperparameters": {**hyperparameters, **stored}})
+    assert load_result(tmp_path, spec) is not None
+    # any other setting still tells runs apart
+    _store(tmp_path, spec, identity={**identity, "hyperparameters": {**hyperparameters, **stored, "tau": 0.5}})
+    with pytest.raises(RunMismatchError, match=r"hyperparameters\.tau: 0\.5 stored"):
+        load_result(tmp_path, spec)
+
+
 def test_results_without_identity_or_of_older_format_are_refused(tmp_path):
     spec = compare_specs(BUDGETS["_micro"], 1)[0]
     _store(tmp_path, spec, identity=False)

@@ -218,6 +218,21 @@ def _differences(stored: Any, expected: Any, path: str = "") -> list[str]:
     return []
 
 
+#: Settings that choose how a model computes, not what: DTDPG's lean step and its written-out backward passes give
+#: the same weights bit for bit as SB3's generic step (``tests/test_lean_step.py``). They are recorded but not compared,
+#: so results stored before they existed, or with them switched off, stay this run's.
+_SAME_RESULT_SETTINGS = ("lean", "backprop")
+
+
+def _compared(identity: dict[str, Any]) -> dict[str, Any]:
+    """:return: the identity without :data:`_SAME_RESULT_SETTINGS`"""
+    hyperparameters = identity.get("hyperparameters")
+    if not isinstance(hyperparameters, dict):
+        return identity
+    kept = {k: v for k, v in hyperparameters.items() if k not in _SAME_RESULT_SETTINGS}
+    return {**identity, "hyperparameters": kept}
+
+
 def check_identity(stored: dict[str, Any], expected: dict[str, Any], what: Path) -> None:
     """
     :param stored: a stored record (a result or a checkpoint pointer) with its ``identity``
@@ -225,7 +240,7 @@ def check_identity(stored: dict[str, Any], expected: dict[str, Any], what: Path)
     :param what: the stored record's file, named in the error
     :raises RunMismatchError: naming the first differences when the identities differ
     """
-    differences = _differences(stored.get("identity", {"format": 1}), expected)
+    differences = _differences(_compared(stored.get("identity", {"format": 1})), _compared(expected))
     if differences:
         shown = "; ".join(differences[:4]) + (f"; and {len(differences) - 4} more" if len(differences) > 4 else "")
         raise RunMismatchError(
