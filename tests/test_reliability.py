@@ -93,7 +93,7 @@ def test_a_result_of_another_run_is_refused(tmp_path, change, pattern):
 
 @pytest.mark.parametrize("stored", [{"lean": False, "backprop": False}, {}], ids=["switched_off", "before_they_existed"])
 def test_the_lean_step_switches_do_not_make_another_run(tmp_path, stored):
-    """lean/backprop give the same weights bit for bit: a result stored with them off, or before they existed, is this run's."""
+    """lean and backprop give the same weights bit for bit: results stored with them off, or before them, are this run's."""
     spec = RunSpec("dtdpg", "noma", 0, 3, scenario="small")
     identity = run_identity(spec)
     assert identity["hyperparameters"]["lean"] is True and identity["hyperparameters"]["backprop"] is True
