@@ -46,6 +46,7 @@ __all__ = [
     "min_outage_power",
     "mqi_upper_bound",
     "outages",
+    "rates",
 ]
 
 
@@ -303,12 +304,6 @@ class CommAwarePlanner(GridPlanner):
             self._grid = np.array(list(itertools.product(np.linspace(-1.0, 1.0, levels), repeat=n_robots)))
         super()._setup(env)
 
-    def _downlink(self, env: Any, power_w: np.ndarray, gain: np.ndarray, interference: np.ndarray) -> np.ndarray:
-        radio = env.scenario.radio
-        noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
-        result = downlink(power_w, gain, interference, radio.bandwidth_per_robot_hz, noise_w_per_hz, env.multiple_access)
-        return result.rate_bps
-
     def extra_cost(self, env: Any) -> np.ndarray:
         self._gain, self._interference = channel_maps(env)
         scenario, n_robots = env.scenario, env.scenario.n_robots
@@ -323,7 +318,7 @@ class CommAwarePlanner(GridPlanner):
         def meets_qos(power_w: np.ndarray) -> np.ndarray:
             power = mates_off.copy()
             power[..., 0] = power_w
-            return ~in_outage(self._downlink(env, power, gain, interference)[..., 0], qos)
+            return ~in_outage(rates(power, gain, interference, scenario, env.multiple_access)[..., 0], qos)
 
         low, high = np.zeros(self._gain.shape), np.full(self._gain.shape, max_power_w)
         for _ in range(40):
@@ -338,7 +333,7 @@ class CommAwarePlanner(GridPlanner):
         ix, iy = env.radio_map.cell_index(next_positions)
         gain, interference = self._gain[ix, iy], self._interference[ix, iy]
         power_w = allocate_power(self._grid, float(dbm_to_watt(env.scenario.ap.max_power_dbm)))
-        rate = self._downlink(env, power_w, gain[None, :], interference[None, :])
+        rate = rates(power_w, gain[None, :], interference[None, :], env.scenario, env.multiple_access)
         qos = env.scenario.radio.qos_rate_bps
         n_outage = (in_outage(rate, qos) & active).sum(axis=1)
         margin = np.where(active, rate / qos, np.inf).min(axis=1)
@@ -425,6 +420,25 @@ def min_outage_power(
     return actions, outages(allocate_power(actions, max_power_w), gain, interference_w, active, scenario, multiple_access)
 
 
+def rates(
+    power_w: np.ndarray, gain: np.ndarray, interference_w: np.ndarray, scenario: Any, multiple_access: str
+) -> np.ndarray:
+    """
+    The robots' rates with these transmit powers: the env's downlink, :func:`~noma_radiomap.downlink.downlink`, with
+    the scenario's radio constants.
+
+    :param power_w: transmit powers, shape (..., U)
+    :param gain: linear AP gains, shape (..., U)
+    :param interference_w: interference powers, shape (..., U)
+    :param scenario: the scenario (its radio constants)
+    :param multiple_access: ``"noma"`` or ``"oma"``
+    :return: the rates in b/s, shape (..., U)
+    """
+    radio = scenario.radio
+    noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
+    return downlink(power_w, gain, interference_w, radio.bandwidth_per_robot_hz, noise_w_per_hz, multiple_access).rate_bps
+
+
 def outages(
     power_w: np.ndarray,
     gain: np.ndarray,
@@ -434,8 +448,8 @@ def outages(
     multiple_access: str,
 ) -> np.ndarray:
     """
-    How many active robots are in outage with these transmit powers (the env's downlink,
-    :func:`~noma_radiomap.downlink.downlink`, and :func:`~noma_radiomap.downlink.in_outage`).
+    How many active robots are in outage with these transmit powers (:func:`rates` and
+    :func:`~noma_radiomap.downlink.in_outage`).
 
     :param power_w: transmit powers, shape (T, U)
     :param gain: linear AP gains, shape (T, U)
@@ -445,10 +459,8 @@ def outages(
     :param multiple_access: ``"noma"`` or ``"oma"``
     :return: the number of active robots in outage, shape (T,)
     """
-    radio = scenario.radio
-    noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
-    rate = downlink(power_w, gain, interference_w, radio.bandwidth_per_robot_hz, noise_w_per_hz, multiple_access).rate_bps
-    return (in_outage(rate, radio.qos_rate_bps) & active).sum(axis=1)
+    rate = rates(power_w, gain, interference_w, scenario, multiple_access)
+    return (in_outage(rate, scenario.radio.qos_rate_bps) & active).sum(axis=1)
 
 
 def single_outage_maps(env: Any, multiple_access: str | None = None) -> tuple[np.ndarray, np.ndarray]:
