@@ -29,7 +29,7 @@ import contextlib
 import math
 import os
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -89,6 +89,23 @@ def _busy_folder_errors(args: argparse.Namespace) -> contextlib.AbstractContextM
             args.error(str(error))
 
     return guard()
+
+
+def _failed_runs_status(args: argparse.Namespace, job: Callable[[argparse.Namespace], None]) -> int:
+    """
+    Run a ``compare`` or ``reproduce`` job; runs that failed (``RunsFailedError``, raised after the tables of the others
+    are written) are one ``error:`` line and exit status 1.
+
+    :return: the exit status
+    """
+    from sb3_dtdpg.experiments.runs import RunsFailedError
+
+    try:
+        job(args)
+    except RunsFailedError as error:
+        print(f"{args.prog}: error: {error}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _split_hyperparams(args: argparse.Namespace) -> None:
@@ -317,8 +334,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         ):
             check_budget(spec)
     with _busy_folder_errors(args):
-        _run_compare(args)
-    return 0
+        return _failed_runs_status(args, _run_compare)
 
 
 def _run_compare(args: argparse.Namespace) -> None:
@@ -345,7 +361,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
                 for spec in specs:
                     check_budget(spec)
     with _busy_folder_errors(args):
-        _run_reproduce(args)
+        status = _failed_runs_status(args, _run_reproduce)
     if args.budget != "paper":
         paper = BUDGETS["paper"]
         print(
@@ -354,7 +370,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             "without the paper-task experiment, which takes about 5 hours more): "
             f"sb3-dtdpg reproduce --budget paper --out <folder>"
         )
-    return 0
+    return status
 
 
 def _run_reproduce(args: argparse.Namespace) -> None:
@@ -515,6 +531,17 @@ def _output_file(suffixes: tuple[str, ...]) -> Any:
     return check
 
 
+def _output_folder(value: str) -> str:
+    """An output folder: it may not exist yet, but no part of its path may be a file."""
+    path = Path(value)
+    for part in (path, *path.parents):
+        if part.exists():
+            if not part.is_dir():
+                raise argparse.ArgumentTypeError(f"{value!r}: {str(part)!r} is a file, expected a folder")
+            break
+    return value
+
+
 def _scenario(value: str) -> str:
     """
     A built-in scenario name or a scenario YAML file, loaded (so validated) once while parsing.
@@ -667,7 +694,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="built-in scenario name, or a YAML path (write ./name for a file named like a built-in) (default: mall)",
     )
     p.add_argument(
-        "--out", default="results/maps", help="output folder; the figure is maps_<scenario>.png (default: results/maps)"
+        "--out",
+        type=_output_folder,
+        default="results/maps",
+        help="output folder; the figure is maps_<scenario>.png (default: results/maps)",
     )
     p.set_defaults(func=_cmd_map)
 
@@ -697,9 +727,10 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help=f"{_OBSERVATION_HELP} ({_ENV_OBSERVATION_NOTE})",
     )
-    p.add_argument("--tb", default=None, help="TensorBoard log folder (default: <out>/tb)")
+    p.add_argument("--tb", type=_output_folder, default=None, help="TensorBoard log folder (default: <out>/tb)")
     p.add_argument(
         "--out",
+        type=_output_folder,
         default="results/train",
         help="output folder: on the NomaRadioMap envs <out>/runs/<run id>/ gets the model, checkpoints and result; "
         "on other envs the model is <algo>_<env id>_s<seed>.zip (default: results/train)",
@@ -726,7 +757,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("compare", "the main job: DT-DPG vs DDPG, NOMA and OMA, several seeds, table and figures")
     p.add_argument("--budget", type=_budget, default="default", help=_budget_help("default"))
     _add_seeds(p)
-    p.add_argument("--out", default="results/compare", help="output folder (default: results/compare)")
+    p.add_argument("--out", type=_output_folder, default="results/compare", help="output folder (default: results/compare)")
     p.add_argument(
         "--algos", nargs="+", choices=_ALGORITHMS, default=["dtdpg", "ddpg"], help="algorithms (default: dtdpg ddpg)"
     )
@@ -755,7 +786,9 @@ def build_parser() -> argparse.ArgumentParser:
         help=_budget_help("tiny, the whole pipeline in minutes, too short to learn; smoke shows learning"),
     )
     _add_seeds(p)
-    p.add_argument("--out", default="results/reproduce", help="output folder (default: results/reproduce)")
+    p.add_argument(
+        "--out", type=_output_folder, default="results/reproduce", help="output folder (default: results/reproduce)"
+    )
     p.add_argument("--report-only", action="store_true", help="only re-draw tables and figures from the finished runs")
     p.add_argument(
         "--experiments",

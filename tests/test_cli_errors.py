@@ -95,6 +95,20 @@ def test_a_scenario_that_is_a_folder_or_a_fifo_says_so(tmp_path, capsys):
     assert_one_error_line(code, printed, "map", "is not a regular file (a FIFO, socket or device)")
 
 
+@pytest.mark.parametrize(
+    "command",
+    [["compare", "--out"], ["reproduce", "--out"], ["map", "--out"], ["train", "--algo", "ddpg", "--out"], ["train", "--tb"]],
+    ids=["compare", "reproduce", "map", "train", "train_tb"],
+)
+def test_an_output_folder_that_is_a_file_says_so(tmp_path, capsys, command):
+    file = tmp_path / "results"
+    file.write_text("kept")
+    for out in (file, file / "compare"):  # the folder itself, or a folder above it
+        code, printed = run_cli([*command, str(out)], capsys)
+        assert_one_error_line(code, printed, command[0], f"{str(file)!r} is a file, expected a folder")
+    assert file.read_text() == "kept"
+
+
 def test_a_bare_builtin_name_is_the_builtin_and_a_path_is_the_file(tmp_path, monkeypatch, capsys):
     from noma_radiomap import load_scenario
 

@@ -11,12 +11,14 @@ import time
 import pytest
 
 from sb3_dtdpg.cli import main
-from sb3_dtdpg.experiments.compare import run_compare
+from sb3_dtdpg.experiments.compare import compare_specs, run_compare
 from sb3_dtdpg.experiments.runs import (
+    BUDGETS,
     OutputBusyError,
     PeriodicCheckpoint,
     RunDivergedError,
     RunMismatchError,
+    RunsFailedError,
     RunSpec,
     output_lock,
     result_path,
@@ -111,6 +113,33 @@ def test_a_diverged_run_records_its_failure_and_leaves_no_checkpoint_behind(tmp_
     # The folder is not held against other settings: the next run trains (before: RunMismatchError)
     result = run_one(dataclasses.replace(SPEC, episodes=6), tmp_path, checkpoint_every=1, resume=True)
     assert result["train"]["episodes"] == 6 and not (run_dir / "failed.json").exists()
+
+
+# ---------------------------------------------------------------------------------------------- failed runs
+def test_a_job_whose_runs_failed_says_so_in_its_table_and_its_exit_status(tmp_path, capsys):
+    specs = compare_specs(BUDGETS["_micro"], 1, algos=("ddpg",))
+    blocked = specs[1].run_id
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / blocked).write_text("")  # a file where the run's folder goes: the run fails, the other trains
+    with pytest.raises(RunsFailedError, match=rf"1 run failed \({blocked}: FileExistsError") as failure:
+        run_compare(tmp_path, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
+    assert list(failure.value.failed) == [blocked]
+    table = (tmp_path / "results.md").read_text()
+    assert f"**Incomplete: 1 of 2 runs failed ({blocked});" in table
+    runs = (tmp_path / "results_runs.csv").read_text()
+    assert blocked == "ddpg_oma_s0_goal" and "\nddpg_noma_goal," in runs and "\nddpg_oma_goal," not in runs
+    # the same job again trains the failed run only, and its table is whole
+    (tmp_path / "runs" / blocked).unlink()
+    run_compare(tmp_path, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
+    assert "Incomplete" not in (tmp_path / "results.md").read_text()
+    assert " s for 1 runs, 1 already done)" in capsys.readouterr().out
+
+
+def test_the_cli_exits_with_status_1_when_runs_failed(tmp_path, capsys):
+    (tmp_path / "runs").write_text("")  # no run can make its folder
+    assert main(["compare", "--budget", "tiny", "--algos", "ddpg", "--out", str(tmp_path), "--no-progress"]) == 1
+    error = capsys.readouterr().err
+    assert "sb3-dtdpg compare: error: 4 runs failed (" in error and "hold only the runs that finished" in error
 
 
 # ---------------------------------------------------------------------------------------------- SIGKILL

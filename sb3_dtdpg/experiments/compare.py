@@ -233,6 +233,7 @@ def run_compare(
     :raises OutputBusyError: another job is using ``out``
     :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
         scenario or hyperparameters): use another folder
+    :raises RunsFailedError: runs failed; the tables and figures of the runs that finished are written first
     """
     from noma_radiomap.registration import check_observation
     from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
@@ -276,7 +277,7 @@ def run_compare(
             f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seed{'s' if seeds != 1 else ''}, "
             f"{hyperparams} hyperparameters, {observation} observation)"
         )
-        tables.save_tables(summary, records, out, "results", title)
+        tables.save_tables(summary, records, out, "results", title, incomplete=report.incomplete_note())
         tables.print_table(summary, title)
         if set(modes) == {"noma", "oma"}:
             margins = format_room_margins(room_margins(planner_rows, budget, env_id, planner_instances))
@@ -327,7 +328,7 @@ def run_compare(
         )
         print(  # also without progress bars: where the results went
             f"wrote {out}/results.md, results.csv, results_runs.csv, learning_curves.png, trajectories.png, "
-            f"statistics_*.png; TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for "
-            f"{len(report.finished)} runs, {len(report.skipped)} already done)"
+            f"statistics_*.png; TensorBoard: tensorboard --logdir {out}/tb ({report.wall_s:.0f} s for {report.counts()})"
         )
+        report.raise_failures(out)
         return summary

@@ -195,7 +195,12 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
 
 
 def write_tables(
-    out: Path, budget: Budget, records: pd.DataFrame, progress: bool = True, channel: str = "radio_map"
+    out: Path,
+    budget: Budget,
+    records: pd.DataFrame,
+    progress: bool = True,
+    channel: str = "radio_map",
+    incomplete: str | None = None,
 ) -> pd.DataFrame:
     """
     Write ``<name>.md``, ``<name>.csv``, ``<name>_runs.csv`` and ``<name>_paired.csv`` (see
@@ -206,6 +211,7 @@ def write_tables(
     :param records: one row per run, the columns of ``paper_task_runs.csv``
     :param progress: print the Markdown table
     :param channel: the runs' training channel
+    :param incomplete: a line saying which runs are missing (failed), written in bold under the title
     :return: the summary, with the reference planners' rows
     """
     summary = _with_planners(_summary(records), budget)
@@ -217,6 +223,9 @@ def write_tables(
         f"{budget.scenario or 'mall'}, {budget.eval_episodes} Rayleigh test missions)"
     )
     text = _markdown(summary, paired, title)
+    if incomplete:
+        heading, _, body = text.partition("\n\n")
+        text = f"{heading}\n\n**{incomplete}.**\n\n{body}"
     name = table_name(channel)
     (out / f"{name}.md").write_text(text)
     summary.to_csv(out / f"{name}.csv", index=False)
@@ -268,6 +277,7 @@ def paper_task_tables(
     results: dict[str, Any],
     progress: bool = True,
     channel: str = "radio_map",
+    incomplete: str | None = None,
 ) -> pd.DataFrame | None:
     """
     Write ``paper_task.md`` / ``paper_task.csv`` (per preset, algorithm and mode), ``paper_task_runs.csv`` (per run),
@@ -276,12 +286,13 @@ def paper_task_tables(
     runs trained with Rayleigh fading (``channel="rayleigh"``) the same as ``paper_task_reality*``.
 
     :param channel: the training channel of ``specs``
+    :param incomplete: a line saying which of ``specs`` failed (:meth:`~sb3_dtdpg.experiments.pool.RunReport.incomplete_note`)
     :return: the summary (with the reference planners' rows), or None when no run has finished
     """
     records = _records(out, specs, results)
     if records.empty:
         return None
-    summary = write_tables(out, budget, records, progress, channel)
+    summary = write_tables(out, budget, records, progress, channel, incomplete)
     groups: dict[str, list[Path]] = {}
     for spec in specs:
         if results.get(spec.run_id) is not None:

@@ -25,7 +25,7 @@ from typing import Any
 from sb3_dtdpg.experiments.specs import RunSpec
 from sb3_dtdpg.experiments.storage import read_progress
 
-__all__ = ["RunBars", "RunReport", "failure_message", "run_in_pool", "worker_pool"]
+__all__ = ["RunBars", "RunReport", "RunsFailedError", "failure_message", "run_in_pool", "worker_pool"]
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -72,6 +72,50 @@ class RunReport:
     skipped: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)
     wall_s: float = math.nan
+
+    def counts(self) -> str:
+        """:return: e.g. ``"4 runs, 2 already done, 1 failed"`` (the failed only when runs failed)"""
+        failed = f", {len(self.failed)} failed" if self.failed else ""
+        return f"{len(self.finished)} runs, {len(self.skipped)} already done{failed}"
+
+    def incomplete_note(self, run_ids: Iterable[str] | None = None) -> str | None:
+        """
+        :param run_ids: the runs of one table (None: every run of the job)
+        :return: the line under a table whose runs failed (None when none of them did)
+        """
+        ids = None if run_ids is None else set(run_ids)
+        failed = [run_id for run_id in self.failed if ids is None or run_id in ids]
+        if not failed:
+            return None
+        total = len(self.finished) + len(self.skipped) + len(self.failed) if ids is None else len(ids)
+        return (
+            f"Incomplete: {len(failed)} of {total} runs failed ({', '.join(failed)}); the table holds only the runs "
+            "that finished, and the same command again trains the failed ones"
+        )
+
+    def raise_failures(self, out: str | Path) -> None:
+        """:raises RunsFailedError: when runs failed"""
+        if self.failed:
+            raise RunsFailedError(self.failed, out)
+
+
+class RunsFailedError(RuntimeError):
+    """
+    Runs of a ``compare`` or ``reproduce`` job failed. The job went on with the others and wrote its tables and
+    figures from the runs that finished; the same command again trains the failed runs.
+
+    :param failed: per failed run id, its error
+    :param out: the job's output folder
+    """
+
+    def __init__(self, failed: dict[str, str], out: str | Path):
+        self.failed = dict(failed)
+        shown = "; ".join(f"{run_id}: {error}" for run_id, error in list(failed.items())[:3])
+        more = f"; and {len(failed) - 3} more" if len(failed) > 3 else ""
+        runs = "run" if len(failed) == 1 else "runs"
+        super().__init__(
+            f"{len(failed)} {runs} failed ({shown}{more}); the tables and figures in {out} hold only the runs that finished"
+        )
 
 
 def run_in_pool(

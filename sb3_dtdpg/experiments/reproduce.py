@@ -34,7 +34,7 @@ from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import plots, tables
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
 from sb3_dtdpg.experiments.paper_task import paper_task_specs, paper_task_tables
-from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunReport, RunSpec, get_budget, load_result, output_lock, run_many
 
 __all__ = [
     "DEFAULT_EXPERIMENTS",
@@ -128,11 +128,24 @@ _PAPER_TASK_CHANNELS = {"paper_task": "radio_map", "paper_task_reality": "raylei
 
 
 def _paper_task_tables(
-    out: Path, budget: Budget, experiments: dict[str, list[RunSpec]], results: dict[str, Any], progress: bool
+    out: Path,
+    budget: Budget,
+    experiments: dict[str, list[RunSpec]],
+    results: dict[str, Any],
+    progress: bool,
+    report: RunReport,
 ) -> dict[str, pd.DataFrame]:
     """The tables of the paper-task experiments that have finished runs (:func:`paper_task_tables`)."""
     summaries = {
-        name: paper_task_tables(out, budget, experiments[name], results, progress, channel)
+        name: paper_task_tables(
+            out,
+            budget,
+            experiments[name],
+            results,
+            progress,
+            channel,
+            incomplete=report.incomplete_note(s.run_id for s in experiments[name]),
+        )
         for name, channel in _PAPER_TASK_CHANNELS.items()
     }
     return {name: summary for name, summary in summaries.items() if summary is not None}
@@ -282,6 +295,7 @@ def run_reproduce(
     :raises OutputBusyError: another job is using ``out``
     :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
         scenario or hyperparameters): use another folder
+    :raises RunsFailedError: runs failed; the tables and figures of the runs that finished are written first
     """
 
     budget = get_budget(budget)
@@ -300,6 +314,7 @@ def run_reproduce(
         wanted = {
             s.run_id for name in (chosen or DEFAULT_EXPERIMENTS) for s in experiments[name] if s.multiple_access in modes
         }
+        report = RunReport()
         if train:
             report = run_many(
                 [s for s in unique if s.run_id in wanted],
@@ -311,6 +326,9 @@ def run_reproduce(
             for run_id, error in report.failed.items():
                 print(f"run {run_id} failed: {error}")
         results = {spec.run_id: load_result(out, spec) for spec in unique}
+
+        def incomplete(name: str) -> str | None:
+            return report.incomplete_note(s.run_id for s in experiments[name])
 
         def records(name: str) -> pd.DataFrame:
             return tables.run_records([results[s.run_id] for s in experiments[name] if results[s.run_id] is not None])
@@ -336,6 +354,7 @@ def run_reproduce(
                 "table_ii",
                 f"Table II: DT-DPG test MQI ({budget.name} budget, {hyperparams} hyperparameters, {observation} observation)",
                 columns=("multiple_access", "approach", "episodes"),
+                incomplete=incomplete("table_ii"),
             )
             out_tables["table_ii"] = summary
             if progress:
@@ -350,7 +369,7 @@ def run_reproduce(
                 f"DDPG vs DT-DPG ({budget.name} budget, {hyperparams} hyperparameters, {observation} observation, "
                 "radio-map training)"
             )
-            tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", title)
+            tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", title, incomplete=incomplete("ddpg_vs_dtdpg"))
             plots.plot_statistics(rec, out, f"DDPG vs DT-DPG, {budget.scenario or 'mall'}, {budget.name} budget")
             out_tables["ddpg_vs_dtdpg"] = summary
             if progress:
@@ -369,11 +388,12 @@ def run_reproduce(
                 f"DT-DPG with two learning rates ({budget.name} budget, {hyperparams} hyperparameters, "
                 f"{observation} observation)",
                 columns=("multiple_access", "learning_rate"),
+                incomplete=incomplete("learning_rates"),
             )
             out_tables["learning_rates"] = summary
             if progress:
                 tables.print_table(summary, "Learning rates (DT-DPG)", columns=("multiple_access", "learning_rate"))
-        out_tables.update(_paper_task_tables(out, budget, experiments, results, progress))
+        out_tables.update(_paper_task_tables(out, budget, experiments, results, progress, report))
         # paired in their own tables
         task_runs = {spec.run_id for name in _PAPER_TASK_CHANNELS for spec in experiments[name]}
         paired = _paired_table(
@@ -391,16 +411,23 @@ def run_reproduce(
         if dip is not None:
             out_tables["transfer_dip"] = dip
         _figures(out, budget, experiments, results, base_lr)
-        finished = sum(results[run_id] is not None for run_id in wanted)
-        in_all = sum(result is not None for result in results.values())
-        counts = f"{finished} of {len(wanted)} runs finished"
-        if len(wanted) < len(results):
-            counts += f" (of all experiments' {len(results)} runs, {in_all})"
         print(
-            f"reproduce: {counts}; tables (.md, .csv) and figures (.png) in {out}/, "
+            f"reproduce: {_counts(wanted, results, report)}; tables (.md, .csv) and figures (.png) in {out}/, "
             f"run folders in {out}/runs/, TensorBoard: tensorboard --logdir {out}/tb"
         )
+        report.raise_failures(out)
         return out_tables
+
+
+def _counts(wanted: set[str], results: dict[str, Any], report: RunReport) -> str:
+    """:return: e.g. ``"20 of 20 runs finished (of all experiments' 130 runs, 20), 1 failed"``"""
+    finished = sum(results[run_id] is not None for run_id in wanted)
+    counts = f"{finished} of {len(wanted)} runs finished"
+    if len(wanted) < len(results):
+        counts += f" (of all experiments' {len(results)} runs, {sum(result is not None for result in results.values())})"
+    if report.failed:
+        counts += f", {len(report.failed)} failed"
+    return counts
 
 
 def _figures(

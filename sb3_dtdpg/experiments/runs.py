@@ -32,7 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files, write_json
 from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS, Budget, check_budget, get_budget
-from sb3_dtdpg.experiments.pool import RunReport, run_in_pool, worker_pool
+from sb3_dtdpg.experiments.pool import RunReport, RunsFailedError, run_in_pool, worker_pool
 from sb3_dtdpg.experiments.run_callbacks import (
     EpisodeCounter,
     EpisodeReturnLogger,
@@ -78,6 +78,7 @@ __all__ = [
     "RunProgress",
     "RunReport",
     "RunSpec",
+    "RunsFailedError",
     "check_budget",
     "get_budget",
     "load_result",

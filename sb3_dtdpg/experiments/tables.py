@@ -390,11 +390,18 @@ def save_tables(
     stem: str,
     title: str,
     columns: Sequence[str] = ("algorithm", "multiple_access"),
+    incomplete: str | None = None,
 ) -> None:
-    """Write ``<stem>.md`` (Markdown), ``<stem>.csv`` (summary) and ``<stem>_runs.csv`` (one row per run)."""
+    """
+    Write ``<stem>.md`` (Markdown), ``<stem>.csv`` (summary) and ``<stem>_runs.csv`` (one row per run).
+
+    :param incomplete: a line saying which runs are missing (failed), written in bold under the table
+    """
     out = Path(out)
+    notes = [f"**{incomplete}.**"] if incomplete else []
+    notes += [f"{note}." for note in table_notes(summary)]
     (out / f"{stem}.md").write_text(
-        f"# {title}\n\n" + format_markdown(summary, columns) + "\n" + "".join(f"{note}.\n\n" for note in table_notes(summary))
+        f"# {title}\n\n" + format_markdown(summary, columns) + "\n" + "".join(f"{note}\n\n" for note in notes)
     )
     summary.to_csv(out / f"{stem}.csv", index=False)
     if not records.empty:
