@@ -405,10 +405,15 @@ def _saved_model_env(args: argparse.Namespace, channel: str) -> tuple[Any, Any, 
     import gymnasium as gym
 
     import noma_radiomap  # noqa: F401  (registers the env ids)
+    from sb3_dtdpg.baselines import is_mission_env
     from sb3_dtdpg.model_files import read_saved_model
 
     with _user_errors(args):
         saved = read_saved_model(args.model, args.algo)
+        env_id = args.env or saved.env_id or _DEFAULT_ENV_ID
+        if not is_mission_env(env_id):
+            where = "--env" if args.env else f"the model's env ({args.model})"
+            raise ValueError(f"{where}: {args.command} runs the NomaRadioMap test missions, got {env_id}")
         settings = dict(saved.settings or {})
         kwargs = saved.env_kwargs(
             channel,
@@ -416,7 +421,6 @@ def _saved_model_env(args: argparse.Namespace, channel: str) -> tuple[Any, Any, 
             observation=args.observation or settings.get("observation") or "goal",
             multiple_access=args.multiple_access,
         )
-        env_id = args.env or saved.env_id or _DEFAULT_ENV_ID
         env = gym.make(env_id, **kwargs)
         try:
             model = saved.load(env)
@@ -520,12 +524,23 @@ _threads = _checked(int, lambda n: n >= 0, "0 (torch's default) or a positive nu
 _positive = _checked(int, lambda n: n >= 1, "a positive integer")
 
 
+def _file_on_the_way(folder: Path) -> Path | None:
+    """:return: the file that stands where ``folder`` or a folder above it would be, or None when there is none"""
+    for part in (folder, *folder.parents):
+        if part.exists():
+            return None if part.is_dir() else part
+    return None
+
+
 def _output_file(suffixes: tuple[str, ...]) -> Any:
     def check(value: str) -> str:
         if Path(value).suffix.lower() not in suffixes:
             raise argparse.ArgumentTypeError(f"expected a {' or '.join(suffixes)} file, got {value!r}")
         if Path(value).is_dir():
             raise argparse.ArgumentTypeError(f"{value!r} is a folder, expected a file name")
+        blocking = _file_on_the_way(Path(value).parent)
+        if blocking is not None:
+            raise argparse.ArgumentTypeError(f"{value!r}: {str(blocking)!r} is a file, expected a folder")
         return value
 
     return check
@@ -533,12 +548,9 @@ def _output_file(suffixes: tuple[str, ...]) -> Any:
 
 def _output_folder(value: str) -> str:
     """An output folder: it may not exist yet, but no part of its path may be a file."""
-    path = Path(value)
-    for part in (path, *path.parents):
-        if part.exists():
-            if not part.is_dir():
-                raise argparse.ArgumentTypeError(f"{value!r}: {str(part)!r} is a file, expected a folder")
-            break
+    blocking = _file_on_the_way(Path(value))
+    if blocking is not None:
+        raise argparse.ArgumentTypeError(f"{value!r}: {str(blocking)!r} is a file, expected a folder")
     return value
 
 

@@ -127,6 +127,24 @@ def test_enjoy_refuses_another_suffix(saved_dtdpg, tmp_path, capsys):
     assert code == 2 and "expected a .gif or .mp4 file" in printed.err
 
 
+@pytest.mark.parametrize(
+    "options",
+    [["--json", "{file}/eval.json"], ["--csv", "{file}/sub/eval.csv"], ["--env", "Pendulum-v1"]],
+    ids=["json_under_a_file", "csv_under_a_file", "env_without_missions"],
+)
+@pytest.mark.parametrize("command", ["evaluate", "enjoy"])
+def test_evaluate_and_enjoy_refuse_bad_outputs_and_envs_before_running(saved_dtdpg, tmp_path, capsys, command, options):
+    if command == "enjoy" and options[0] != "--env":
+        options = ["--record", options[1].replace(".json", ".gif").replace(".csv", ".gif")]
+    file = tmp_path / "results"
+    file.write_text("kept")
+    code, printed = run_cli([command, str(saved_dtdpg), *(o.format(file=file) for o in options)], capsys)
+    assert code == 2 and "Traceback" not in printed.err and printed.out == ""
+    expected = "runs the NomaRadioMap test missions, got Pendulum-v1" if options[0] == "--env" else f"{str(file)!r} is a file"
+    assert f"sb3-dtdpg {command}: error: " in printed.err and expected in printed.err
+    assert file.read_text() == "kept"
+
+
 def test_settings_of_a_model_without_a_record_come_from_its_run_or_its_observation_length(tmp_path):
     from sb3_dtdpg.model_files import read_saved_model
 
