@@ -166,6 +166,8 @@ def make_mission_vec_env(
     :param monitor: wrap in ``VecMonitor``
     :return: the vector env
     """
+    if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
+        raise ValueError(f"n_envs must be an integer >= 1, got {n_envs!r}")
     env: VecEnv = MissionVecEnv.from_id(env_id, n_envs, **(env_kwargs or {}))
     if seed is not None:
         env.seed(seed)

@@ -205,6 +205,12 @@ def test_bad_arguments_name_the_field(kwargs, match):
         NomaRadioMapVecEnv(**{"scenario": "small", **kwargs})
 
 
+@pytest.mark.parametrize("n_envs", [0, -1, 2.0, True])
+def test_make_mission_vec_env_names_its_own_argument(n_envs):
+    with pytest.raises(ValueError, match=rf"n_envs must be an integer >= 1, got {n_envs!r}"):
+        make_mission_vec_env(n_envs=n_envs, env_kwargs={"scenario": "small"})
+
+
 @pytest.mark.parametrize("n_envs", [2, 4])
 def test_dtdpg_curriculum_on_the_vector_env(tmp_path, n_envs):
     env = make_mission_vec_env(n_envs=n_envs, seed=0, env_kwargs={"scenario": "small", "max_episode_steps": 10})
