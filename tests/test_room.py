@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 import noma_radiomap  # noqa: F401
-from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, mqi_upper_bound, rayleigh_power
+from noma_radiomap.planners import (
+    ReferencePlanner,
+    ShortestPathPlanner,
+    _geodesic_steps,
+    mqi_upper_bound,
+    rayleigh_power,
+)
 from noma_radiomap.propagation import dbm_to_watt
 from sb3_dtdpg.evaluation import evaluate
 from sb3_dtdpg.experiments.compare import (
@@ -109,10 +115,27 @@ def test_upper_bound_holds_on_every_test_mission(scores, test_missions):
     for mode in ("noma", "oma"):
         env = gym.make("NomaRadioMap-v0", channel="radio_map", multiple_access=mode)
         base = env.unwrapped
-        for record in scores["radio_map", mode, BEST_PLANNER].episodes:
+        for planner in (BEST_PLANNER, SHORTEST_PATH_PLANNER):
+            for record in scores["radio_map", mode, planner].episodes:
+                env.reset(seed=record["seed"])
+                bound = mqi_upper_bound(base, base.positions, base.destinations)
+                assert record["mqi"] <= bound + 1e-9, (mode, planner, record["seed"], record["mqi"], bound)
+
+
+def test_no_robot_arrives_sooner_than_its_shortest_path_allows(scores):
+    """The steps of the bound's path-length relaxation, against the planners' robots: never more, and within one step
+    of the shortest-path planner's robots (which follow a grid path, a little longer than the shortest line)."""
+    env = gym.make("NomaRadioMap-v0", channel="radio_map")
+    base = env.unwrapped
+    tight = 0
+    for planner in (BEST_PLANNER, SHORTEST_PATH_PLANNER):
+        for record in scores["radio_map", "noma", planner].episodes:
             env.reset(seed=record["seed"])
-            bound = mqi_upper_bound(base, base.positions, base.destinations)
-            assert record["mqi"] <= bound + 1e-9, (mode, record["seed"], record["mqi"], bound)
+            for robot, (start, goal) in enumerate(zip(base.positions, base.destinations, strict=True)):
+                least = _geodesic_steps(base, start, goal)
+                assert least <= record[f"mission_time_{robot}"], (planner, record["seed"], robot, least)
+                tight += planner == SHORTEST_PATH_PLANNER and least >= record[f"mission_time_{robot}"] - 1
+    assert tight == 40  # within one step of every robot of the shortest-path planner
 
 
 def test_the_compare_table_prints_the_margins_of_the_default_room(scores):
@@ -133,3 +156,22 @@ def test_the_compare_table_prints_the_margins_of_the_default_room(scores):
     line = format_room_margins(margins)
     assert f"{margins['path radio_map']:+.1f} / {margins['path rayleigh']:+.1f}" in line
     assert f"{margins['noma radio_map']:+.1f} / {margins['noma rayleigh']:+.1f}" in line
+
+
+def test_path_lengths_go_around_a_wall_through_its_gap():
+    """A wall with a gap at the top: the shortest path from one side to the other bends at the gap's two corners."""
+    from types import SimpleNamespace
+
+    from noma_radiomap.planners import _path_lengths
+
+    blocked = np.zeros((10, 10), dtype=bool)
+    blocked[5, :8] = True  # x in [5, 6), y in [0, 8)
+    env = SimpleNamespace(
+        scenario=SimpleNamespace(room=SimpleNamespace(resolution=1.0), robot=SimpleNamespace(arrival_radius=0.5)),
+        radio_map=SimpleNamespace(blocked=blocked),
+    )
+    around = 2 * np.hypot(3.0, 6.0) + 1.0  # (2, 2) -> (5, 8) -> (6, 8) -> (9, 2)
+    lengths = _path_lengths(env, np.array([[2.0, 2.0], [2.0, 9.0], [8.0, 2.0]]), np.array([9.0, 2.0]))
+    over = np.hypot(4.0, 1.0) + np.hypot(3.0, 6.0)  # (2, 9) -> (6, 8) -> (9, 2): over the wall's top corner
+    assert lengths == pytest.approx([around - 0.5, over - 0.5, 0.5])
+    assert _path_lengths(env, np.array([[9.0, 2.0]]), np.array([9.0, 2.0])) == pytest.approx([0.0])

@@ -24,6 +24,7 @@ indicator. The shortest-path planner uses ``o = 0``.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from typing import Any
 
@@ -31,6 +32,7 @@ import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from noma_radiomap import geometry
+from noma_radiomap.compiled import compiled
 from noma_radiomap.downlink import allocate_power, decoding_order, downlink, equivalent_gain, in_outage
 from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import dbm_to_watt
@@ -492,13 +494,141 @@ def _reach_offsets(scenario: Any) -> np.ndarray:
     return offsets
 
 
+@compiled
+def _clear_segments(a: np.ndarray, b: np.ndarray, padded: np.ndarray, resolution: float) -> np.ndarray:
+    """
+    Whether the segments from each point of ``a`` (A, 2) to each of ``b`` (B, 2) stay out of the obstacles'
+    interior, sampled every quarter cell. A sample is inside when the four cells around it, a hair away along both
+    axes, are blocked (``padded``: the blocked cells with a blocked border, so the room's outside counts as
+    blocked), so a segment may run along an obstacle. A segment that only clips an obstacle between two samples
+    counts as clear, which can only shorten the distances of :func:`_geodesic_steps` (its bound stays a bound).
+
+    :return: bool (A, B)
+    """
+    eps = 1e-6 * resolution
+    clear = np.ones((a.shape[0], b.shape[0]), dtype=np.bool_)
+    for i in range(a.shape[0]):
+        for j in range(b.shape[0]):
+            dx, dy = b[j, 0] - a[i, 0], b[j, 1] - a[i, 1]
+            n = max(2, int(np.ceil(4.0 * max(abs(dx), abs(dy)) / resolution)) + 1)
+            for k in range(n):
+                t = k / (n - 1)
+                x, y = a[i, 0] + t * dx, a[i, 1] + t * dy
+                inside = True
+                for sx in (-eps, eps):
+                    for sy in (-eps, eps):
+                        ix = min(max(int(np.floor((x + sx) / resolution)) + 1, 0), padded.shape[0] - 1)
+                        iy = min(max(int(np.floor((y + sy) / resolution)) + 1, 0), padded.shape[1] - 1)
+                        inside = inside and padded[ix, iy]
+                if inside:
+                    clear[i, j] = False
+                    break
+    return clear
+
+
+@functools.lru_cache(maxsize=8)
+def _corner_graph(
+    blocked_bytes: bytes, shape: tuple[int, int], resolution: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    The corners a shortest path around the obstacles can bend at, their shortest distances to each other, and
+    which of them each cell centre sees.
+
+    A shortest path in the free region (a union of grid cells) is a polygonal line bending only at convex corners
+    of the obstacles: grid points where one of the four cells meeting there is blocked, or two diagonal ones (a
+    pinch the motion model does not pass; the relaxation may). Distances along the visibility graph of these
+    corners, by Dijkstra.
+
+    :return: the corners (C, 2) in metres, their distances (C, C) and the cell centres' sight of them (nx, ny, C)
+    """
+    blocked = np.frombuffer(blocked_bytes, dtype=bool).reshape(shape)
+    padded = np.pad(blocked, 1, constant_values=True)
+    quads = np.stack([padded[:-1, :-1], padded[1:, :-1], padded[:-1, 1:], padded[1:, 1:]])
+    count = quads.sum(axis=0)
+    pinch = (count == 2) & (quads[0] == quads[3])
+    ix, iy = np.nonzero((count == 1) | pinch)
+    corners = np.stack([ix, iy], axis=1).astype(float) * resolution
+    lengths = np.hypot(*(corners[:, None, :] - corners[None, :, :]).transpose(2, 0, 1))
+    graph = np.where(_clear_segments(corners, corners, padded, resolution), lengths, 0.0)
+    centres = (np.stack(np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij"), axis=-1) + 0.5) * resolution
+    sight = _clear_segments(centres.reshape(-1, 2), corners, padded, resolution).reshape(*shape, len(corners))
+    return corners, dijkstra(graph, directed=False), sight
+
+
+def _disc_is_free(blocked: np.ndarray, resolution: float, centre: np.ndarray, radius: float) -> bool:
+    """:return: whether no blocked cell (nor the room's outside) meets the disc, so that every point of it sees its
+    centre"""
+    nx, ny = blocked.shape
+    if np.any(centre - radius < 0.0) or centre[0] + radius > nx * resolution or centre[1] + radius > ny * resolution:
+        return False
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    gap_x = np.maximum(0.0, np.maximum(ix * resolution - centre[0], centre[0] - (ix + 1) * resolution))
+    gap_y = np.maximum(0.0, np.maximum(iy * resolution - centre[1], centre[1] - (iy + 1) * resolution))
+    return not bool((blocked & (np.hypot(gap_x, gap_y) <= radius)).any())
+
+
+def _path_lengths(env: Any, points: np.ndarray, destination: np.ndarray, sight: np.ndarray | None = None) -> np.ndarray:
+    """
+    Lower bounds on the length of any path from each point (N, 2) into a robot's arrival disc that never enters an
+    obstacle. Where the disc is free (every point of it sees the destination), the shortest path around the
+    obstacles to the destination (through the corners of :func:`_corner_graph`) less the radius; else the
+    shortest path to a corner (or none) plus the straight distance from there to the disc, walls ignored.
+
+    :param sight: which corners each point sees (N, C); None: tested here
+    :return: lengths in metres (N,)
+    """
+    scenario, blocked = env.scenario, env.radio_map.blocked
+    resolution = scenario.room.resolution
+    corners, between, _ = _corner_graph(blocked.tobytes(), blocked.shape, resolution)
+    radius = scenario.robot.arrival_radius
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    destination = np.asarray(destination, dtype=float)
+    padded = np.pad(blocked, 1, constant_values=True)
+
+    def last_legs(origins: np.ndarray) -> np.ndarray:
+        """Straight on to the destination: the segment clear where the disc is free, walls ignored elsewhere"""
+        straight = np.hypot(*(origins - destination).T)
+        if not free_disc:
+            return straight
+        return np.where(_clear_segments(origins, destination[None, :], padded, resolution)[:, 0], straight, np.inf)
+
+    free_disc = _disc_is_free(blocked, resolution, destination, radius)
+    lengths = last_legs(points)
+    if len(corners):
+        via = (between + last_legs(corners)[None, :]).min(axis=1)  # from each corner, through the others
+        if sight is None:
+            sight = _clear_segments(points, corners, padded, resolution)
+        from_points = np.where(sight, np.hypot(*(points[:, None, :] - corners[None, :, :]).transpose(2, 0, 1)), np.inf)
+        lengths = np.minimum(lengths, (from_points + via[None, :]).min(axis=1))
+    return np.maximum(0.0, lengths - radius)
+
+
+def _geodesic_steps(env: Any, start: np.ndarray, destination: np.ndarray) -> int:
+    """
+    A lower bound on the steps a robot needs to arrive, whatever it does: a step moves it along a path at most
+    ``V_max dt`` long that never enters an obstacle (:class:`~noma_radiomap.motion.GridMotion`), so it needs at
+    least :func:`_path_lengths` over ``V_max dt`` steps.
+
+    :param env: the unwrapped env
+    :param start: the robot's position (2,)
+    :param destination: its destination (2,)
+    :return: the least number of steps
+    """
+    scenario = env.scenario
+    length = float(_path_lengths(env, np.asarray(start, dtype=float)[None, :], np.asarray(destination, dtype=float))[0])
+    return int(np.ceil(length / (scenario.robot.v_max * scenario.mission.time_step) - 1e-9))
+
+
 def mqi_upper_bound(env: Any, starts: np.ndarray, destinations: np.ndarray) -> float:
     """
     An upper bound on the MQI of any policy on one mission, on the radio-map channel: a relaxation in which
-    each robot is alone with the whole AP power (no NOMA coupling, no power split) and may move from anywhere
-    in its cell to any free cell within ``V_max dt`` plus a cell diagonal per step (walls ignored within a step).
-    Per robot, value iteration on the grid gives the least ``steps + lambda x outage steps`` to arrive
-    (within ``arrival_radius`` plus half a cell diagonal); the bound is ``t_total`` minus their sum.
+    each robot is alone with the whole AP power (no NOMA coupling, no power split). Per robot, the larger of two
+    lower bounds on its ``steps + lambda x outage steps``: value iteration on the grid, where a robot may move
+    from anywhere in its cell to any free cell within ``V_max dt`` plus a cell diagonal per step (walls ignored
+    within a step) and arrives within ``arrival_radius`` plus half a cell diagonal, never below the steps that the
+    shortest path around the obstacles from anywhere in a cell needs (:func:`_path_lengths`; the grid relaxation
+    alone underestimates a path by up to a cell diagonal per step); and its steps alone from its start
+    (:func:`_geodesic_steps`). The bound is ``t_total`` minus their sum.
 
     :param env: the unwrapped env (its scenario, radio map and multiple access)
     :param starts: start points (U, 2)
@@ -515,8 +645,15 @@ def mqi_upper_bound(env: Any, starts: np.ndarray, destinations: np.ndarray) -> f
     centres = (np.stack(np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij"), axis=-1) + 0.5) * scenario.room.resolution
     arrival = scenario.robot.arrival_radius + scenario.room.resolution / np.sqrt(2)
     total = 0.0
+    max_step = scenario.robot.v_max * mission.time_step
+    free = ~radio_map.blocked
+    sight = _corner_graph(radio_map.blocked.tobytes(), radio_map.blocked.shape, scenario.room.resolution)[2][free]
     for start, goal in zip(np.asarray(starts, dtype=float), np.asarray(destinations, dtype=float), strict=True):
         near = np.hypot(*(centres - goal).transpose(2, 0, 1)) <= arrival
+        # From anywhere in a cell at least the steps of the path length from its centre less half a diagonal
+        floor = np.zeros((nx, ny))
+        lengths = _path_lengths(env, centres[free], goal, sight) - scenario.room.resolution / np.sqrt(2.0)
+        floor[free] = np.ceil(np.maximum(0.0, lengths) / max_step - 1e-9)
         to_go = np.full((nx, ny), np.inf)  # least cost to arrive from each cell, not yet arrived
         for _ in range(int(mission.max_steps)):
             after = step_cost + np.where(near, 0.0, to_go)  # cost of stepping into a cell
@@ -524,11 +661,13 @@ def mqi_upper_bound(env: Any, starts: np.ndarray, destinations: np.ndarray) -> f
             new = np.full((nx, ny), np.inf)
             for dx, dy in offsets:
                 np.minimum(new, padded[pad + dx : pad + dx + nx, pad + dy : pad + dy + ny], out=new)
+            np.maximum(new, floor, out=new)
             if np.array_equal(new, to_go):
                 break
             to_go = new
         cell = tuple(int(i) for i in radio_map.cell_index(start))
-        total += min(float(to_go[cell]), float(mission.max_steps))
+        least = max(float(to_go[cell]), float(_geodesic_steps(env, start, goal)))
+        total += min(least, float(mission.max_steps))
     return float(mission.t_total - total)
 
 
