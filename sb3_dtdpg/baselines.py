@@ -199,6 +199,8 @@ def make_env(
         (None: the env id's own)
     :param env_kwargs: extra ``gymnasium.make`` keyword arguments (e.g. ``scenario``)
     :return: the env
+    :raises ValueError: on mission options for another env, or an env whose actions are not continuous (every
+        algorithm of the set acts in a ``Box``)
     """
     _check_algo(algo)
     mission_options = {"multiple_access": multiple_access, "channel": channel}
@@ -206,7 +208,11 @@ def make_env(
         given = [name for name, value in mission_options.items() if value is not None]
         if given:
             raise ValueError(f"{env_id} is not a NomaRadioMap env: {', '.join(given)} apply to the mission envs only")
-        return Monitor(gym.make(env_id, **(env_kwargs or {})))
+        env = gym.make(env_id, **(env_kwargs or {}))
+        if not isinstance(env.action_space, gym.spaces.Box):
+            env.close()
+            raise ValueError(f"{env_id}: {algo} needs a continuous (Box) action space, the env has {env.action_space}")
+        return Monitor(env)
     kwargs = {name: value for name, value in mission_options.items() if value is not None}
     kwargs.update(env_kwargs or {})
     kwargs["reward_phase"] = reward_phase(algo)

@@ -53,6 +53,13 @@ def test_train_user_errors_create_nothing(extra, message, tmp_path, monkeypatch,
     assert list(tmp_path.iterdir()) == []
 
 
+def test_an_env_with_discrete_actions_is_a_user_error(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    code, printed = run_cli(["train", "--algo", "dtdpg", "--env", "CartPole-v1", "--timesteps", "5000"], capsys)
+    assert_one_error_line(code, printed, "train", "CartPole-v1: dtdpg needs a continuous (Box) action space")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_did_you_mean_names_the_right_key(capsys):
     code, printed = run_cli(["train", "--algo", "ddpg", "--hyperparams", "bach_size:64"], capsys)
     assert_one_error_line(code, printed, "train", "did you mean 'batch_size'")

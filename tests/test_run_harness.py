@@ -22,6 +22,7 @@ from sb3_dtdpg.experiments.runs import (
     RunSpec,
     output_lock,
     result_path,
+    run_many,
     run_one,
 )
 
@@ -133,6 +134,19 @@ def test_a_job_whose_runs_failed_says_so_in_its_table_and_its_exit_status(tmp_pa
     run_compare(tmp_path, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
     assert "Incomplete" not in (tmp_path / "results.md").read_text()
     assert " s for 1 runs, 1 already done)" in capsys.readouterr().out
+
+
+def test_a_run_given_twice_runs_once(tmp_path):
+    spec = dataclasses.replace(SPEC, episodes=3)
+    report = run_many([spec, spec], tmp_path, n_workers=2, progress=False)
+    assert report.finished == [spec.run_id] and not report.failed
+    with pytest.raises(ValueError, match=rf"two runs share the id '{spec.run_id}' with other settings"):
+        run_many([spec, dataclasses.replace(spec, eval_episodes=2)], tmp_path / "other", progress=False)
+    # compare with an algorithm and a mode given twice: one row each (was a pandas error after training)
+    summary = run_compare(
+        tmp_path / "compare", budget="_micro", seeds=1, algos=["ddpg", "ddpg"], modes=["noma", "noma"], progress=False
+    )
+    assert list(summary["algorithm"]).count("DDPG") == 1
 
 
 def test_the_cli_exits_with_status_1_when_runs_failed(tmp_path, capsys):

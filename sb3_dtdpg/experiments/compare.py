@@ -242,6 +242,7 @@ def run_compare(
     budget = get_budget(budget)
     if scenario is not None:
         budget = dataclasses.replace(budget, scenario=scenario)
+    algos, modes = list(dict.fromkeys(algos)), list(dict.fromkeys(modes))  # a name given twice is one run per seed
     unknown = [a for a in algos if a not in ALGORITHMS]
     if unknown:
         raise ValueError(f"algos: unknown algorithm(s) {unknown}, expected some of {ALGORITHMS}")

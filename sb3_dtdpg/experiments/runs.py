@@ -386,8 +386,14 @@ def run_many(
     :param on_finish: called with each run id as it finishes
     :return: the report
     :raises RunMismatchError: a stored result is another run's (checked for every run before any starts)
-    :raises ValueError: a run's budget cannot train (:func:`prepare_run`, for every run before any starts)
+    :raises ValueError: a run's budget cannot train (:func:`prepare_run`, for every run before any starts), or two
+        runs share an id with other settings
     """
+    unique: dict[str, RunSpec] = {}
+    for spec in specs:  # a run given twice runs once: two workers must never write one run's folder
+        if unique.setdefault(spec.run_id, spec) != spec:
+            raise ValueError(f"two runs share the id {spec.run_id!r} with other settings: {unique[spec.run_id]} and {spec}")
+    specs = list(unique.values())
     identities = [prepare_run(spec) for spec in specs]  # every run's checks before any run starts
     report = RunReport()
     todo: list[tuple[RunSpec, str, dict[str, Any]]] = []
