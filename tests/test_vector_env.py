@@ -196,6 +196,7 @@ def test_make_mission_vec_env_monitors_episodes():
     ("kwargs", "match"),
     [
         ({"num_envs": 0}, "num_envs"),
+        ({"num_envs": 10**8}, r"num_envs: 100,000,000 missions need about 223\.52 GiB .* more than the cap"),
         ({"render_mode": "human"}, "render_mode"),
         ({"max_episode_steps": 0}, "max_episode_steps"),
     ],

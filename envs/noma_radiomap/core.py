@@ -22,7 +22,7 @@ from noma_radiomap.downlink import MULTIPLE_ACCESS, allocate_rows, in_outage, si
 from noma_radiomap.motion import GridMotion, move_robots
 from noma_radiomap.observations import GAIN_DB_RANGE, Observer, check_observation, default_observation
 from noma_radiomap.propagation import dbm_to_watt, linear_to_db, rayleigh_fading
-from noma_radiomap.radiomap import RadioMap
+from noma_radiomap.radiomap import RadioMap, check_missions_memory
 from noma_radiomap.rewards import component_rows, weighted_rows
 from noma_radiomap.sampling import MissionSampler
 from noma_radiomap.scenario import Scenario, load_scenario
@@ -239,6 +239,7 @@ class MissionCore:
         self.sampler = MissionSampler(sc, self.radio_map, self.motion, fixed_destinations=task == "paper")
 
         n, u = int(num_missions), self.n_robots
+        check_missions_memory(n)
         self.num_missions = n
         self.np_randoms: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(n)]
         self.reward_phases = [reward_phase] * n

@@ -34,9 +34,10 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
-#: Largest estimated memory of a scenario's radio map and the env's tables (:func:`estimated_memory`), in bytes;
-#: a scenario that needs more is refused when it is loaded, before anything is allocated. Override it by
-#: setting this attribute, or the environment variable ``NOMA_RADIOMAP_MAX_MEMORY_BYTES``.
+#: Largest estimated memory of a scenario's radio map and the env's tables (:func:`estimated_memory`), and of the
+#: missions of a vector env (:func:`check_missions_memory`), in bytes; a scenario or a number of missions that needs
+#: more is refused before anything is allocated. Override it by setting this attribute, or the environment variable
+#: ``NOMA_RADIOMAP_MAX_MEMORY_BYTES``.
 MAX_MEMORY_BYTES = 2**30
 _MEMORY_VARIABLE = "NOMA_RADIOMAP_MAX_MEMORY_BYTES"
 #: float64 arrays of one value per cell that a radio map holds or builds (the layout heights, the cell centres
@@ -44,6 +45,8 @@ _MEMORY_VARIABLE = "NOMA_RADIOMAP_MAX_MEMORY_BYTES"
 #: path loss, gains in dB, linear path gain and expected gain, the distances) and, in the env, per transmitter
 #: twice (its gain table and that table's transposed copy), plus one per interferer (their stacked gains).
 _PER_CELL, _PER_CELL_TRANSMITTER, _PER_CELL_TABLE = 10, 6, 2
+#: Memory of one mission of a vector env, in bytes (measured: its own random generator, about 2 KB, and its arrays)
+_PER_MISSION = 2_400
 
 
 def estimated_memory(scenario: Scenario) -> dict[str, int]:
@@ -102,6 +105,20 @@ def check_memory(scenario: Scenario) -> None:
             f"radio map and the env's tables ({_size(estimate['maps'])} of maps, {_size(estimate['tables'])} of gain "
             f"tables, {_size(estimate['occlusion'])} of occlusion buffers), more than the cap of {_size(cap)}; use a "
             f"coarser room.resolution or fewer interferers, or raise the cap ({_MEMORY_VARIABLE} or "
+            "noma_radiomap.radiomap.MAX_MEMORY_BYTES)"
+        )
+
+
+def check_missions_memory(n_missions: int) -> None:
+    """
+    :param n_missions: the missions of a vector env (``num_envs``)
+    :raises ValueError: they need more than :func:`memory_cap`, naming the numbers
+    """
+    need, cap = n_missions * _PER_MISSION, memory_cap()
+    if need > cap:
+        raise ValueError(
+            f"num_envs: {n_missions:,} missions need about {_size(need)} (each its own random generator and arrays), "
+            f"more than the cap of {_size(cap)}; use fewer missions, or raise the cap ({_MEMORY_VARIABLE} or "
             "noma_radiomap.radiomap.MAX_MEMORY_BYTES)"
         )
 
