@@ -175,3 +175,20 @@ def test_path_lengths_go_around_a_wall_through_its_gap():
     over = np.hypot(4.0, 1.0) + np.hypot(3.0, 6.0)  # (2, 9) -> (6, 8) -> (9, 2): over the wall's top corner
     assert lengths == pytest.approx([around - 0.5, over - 0.5, 0.5])
     assert _path_lengths(env, np.array([[9.0, 2.0]]), np.array([9.0, 2.0])) == pytest.approx([0.0])
+
+
+def test_a_room_with_too_many_corners_falls_back_to_the_grid_bound(monkeypatch):
+    from noma_radiomap import planners
+
+    env = gym.make("NomaRadioMap-v0", channel="radio_map")
+    env.reset(seed=10_000)
+    base = env.unwrapped
+    tight = mqi_upper_bound(base, base.positions, base.destinations)
+    monkeypatch.setattr(planners, "_MAX_SEGMENTS", 10)  # fewer segments than mall's corners need
+    planners._corner_graph.cache_clear()
+    try:
+        assert planners._corner_graph(base.radio_map.blocked.tobytes(), base.radio_map.blocked.shape, 0.5) is None
+        loose = mqi_upper_bound(base, base.positions, base.destinations)
+    finally:
+        planners._corner_graph.cache_clear()
+    assert loose > tight + 10  # the grid relaxation alone: still a bound, a looser one

@@ -526,32 +526,51 @@ def _clear_segments(a: np.ndarray, b: np.ndarray, padded: np.ndarray, resolution
     return clear
 
 
-@functools.lru_cache(maxsize=8)
-def _corner_graph(
-    blocked_bytes: bytes, shape: tuple[int, int], resolution: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """
-    The corners a shortest path around the obstacles can bend at, their shortest distances to each other, and
-    which of them each cell centre sees.
+#: Most segments :func:`mqi_upper_bound` tests for its shortest paths around the obstacles (corner to corner, cell
+#: to corner); a room with more (a large room with many obstacles) gets the grid relaxation alone, a looser bound.
+_MAX_SEGMENTS = 20_000_000
 
-    A shortest path in the free region (a union of grid cells) is a polygonal line bending only at convex corners
-    of the obstacles: grid points where one of the four cells meeting there is blocked, or two diagonal ones (a
-    pinch the motion model does not pass; the relaxation may). Distances along the visibility graph of these
-    corners, by Dijkstra.
 
-    :return: the corners (C, 2) in metres, their distances (C, C) and the cell centres' sight of them (nx, ny, C)
+def _corners(blocked: np.ndarray, resolution: float) -> np.ndarray:
     """
-    blocked = np.frombuffer(blocked_bytes, dtype=bool).reshape(shape)
+    The corners a shortest path around the obstacles can bend at: a shortest path in the free region (a union of
+    grid cells) is a polygonal line bending only at convex corners of the obstacles, grid points where one of the
+    four cells meeting there is blocked, or two diagonal ones (a pinch the motion model does not pass; the
+    relaxation may). Cells outside the room count as blocked.
+
+    :return: the corners (C, 2) in metres
+    """
     padded = np.pad(blocked, 1, constant_values=True)
     quads = np.stack([padded[:-1, :-1], padded[1:, :-1], padded[:-1, 1:], padded[1:, 1:]])
     count = quads.sum(axis=0)
     pinch = (count == 2) & (quads[0] == quads[3])
     ix, iy = np.nonzero((count == 1) | pinch)
-    corners = np.stack([ix, iy], axis=1).astype(float) * resolution
+    return np.stack([ix, iy], axis=1).astype(float) * resolution
+
+
+@functools.lru_cache(maxsize=8)
+def _corner_graph(
+    blocked_bytes: bytes, shape: tuple[int, int], resolution: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
+    """
+    The corners of :func:`_corners`, their shortest distances to each other along their visibility graph (by
+    Dijkstra), and which of them each cell centre sees.
+
+    :return: the corners (C, 2) in metres, their distances (C, C) and the cell centres' sight of them (nx, ny, C;
+        None beyond :data:`_MAX_SEGMENTS`), or None when the corners alone are beyond it
+    """
+    blocked = np.frombuffer(blocked_bytes, dtype=bool).reshape(shape)
+    padded = np.pad(blocked, 1, constant_values=True)
+    corners = _corners(blocked, resolution)
+    if len(corners) ** 2 > _MAX_SEGMENTS:
+        return None
     lengths = np.hypot(*(corners[:, None, :] - corners[None, :, :]).transpose(2, 0, 1))
     graph = np.where(_clear_segments(corners, corners, padded, resolution), lengths, 0.0)
-    centres = (np.stack(np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij"), axis=-1) + 0.5) * resolution
-    sight = _clear_segments(centres.reshape(-1, 2), corners, padded, resolution).reshape(*shape, len(corners))
+    sight = None
+    if blocked.size * len(corners) <= _MAX_SEGMENTS:
+        grid = np.stack(np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij"), axis=-1)
+        centres = (grid.reshape(-1, 2) + 0.5) * resolution
+        sight = _clear_segments(centres, corners, padded, resolution).reshape(*shape, len(corners))
     return corners, dijkstra(graph, directed=False), sight
 
 
@@ -579,7 +598,10 @@ def _path_lengths(env: Any, points: np.ndarray, destination: np.ndarray, sight: 
     """
     scenario, blocked = env.scenario, env.radio_map.blocked
     resolution = scenario.room.resolution
-    corners, between, _ = _corner_graph(blocked.tobytes(), blocked.shape, resolution)
+    graph = _corner_graph(blocked.tobytes(), blocked.shape, resolution)
+    if graph is None:  # too many corners: no bound from the paths around them
+        return np.zeros(len(np.asarray(points).reshape(-1, 2)))
+    corners, between, _ = graph
     radius = scenario.robot.arrival_radius
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     destination = np.asarray(destination, dtype=float)
@@ -647,13 +669,15 @@ def mqi_upper_bound(env: Any, starts: np.ndarray, destinations: np.ndarray) -> f
     total = 0.0
     max_step = scenario.robot.v_max * mission.time_step
     free = ~radio_map.blocked
-    sight = _corner_graph(radio_map.blocked.tobytes(), radio_map.blocked.shape, scenario.room.resolution)[2][free]
+    graph = _corner_graph(radio_map.blocked.tobytes(), radio_map.blocked.shape, scenario.room.resolution)
+    sight = None if graph is None or graph[2] is None else graph[2][free]
     for start, goal in zip(np.asarray(starts, dtype=float), np.asarray(destinations, dtype=float), strict=True):
         near = np.hypot(*(centres - goal).transpose(2, 0, 1)) <= arrival
         # From anywhere in a cell at least the steps of the path length from its centre less half a diagonal
         floor = np.zeros((nx, ny))
-        lengths = _path_lengths(env, centres[free], goal, sight) - scenario.room.resolution / np.sqrt(2.0)
-        floor[free] = np.ceil(np.maximum(0.0, lengths) / max_step - 1e-9)
+        if sight is not None:
+            lengths = _path_lengths(env, centres[free], goal, sight) - scenario.room.resolution / np.sqrt(2.0)
+            floor[free] = np.ceil(np.maximum(0.0, lengths) / max_step - 1e-9)
         to_go = np.full((nx, ny), np.inf)  # least cost to arrive from each cell, not yet arrived
         for _ in range(int(mission.max_steps)):
             after = step_cost + np.where(near, 0.0, to_go)  # cost of stepping into a cell
