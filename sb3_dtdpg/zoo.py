@@ -35,6 +35,7 @@ from sb3_dtdpg.common.phases import REPLAY_HANDLINGS
 from sb3_dtdpg.dtdpg import DTDPG
 from sb3_dtdpg.env_settings import record
 from sb3_dtdpg.missions import default_phases
+from sb3_dtdpg.overrides import HyperparameterError
 
 ALGO_NAME = "dtdpg"
 
@@ -235,12 +236,15 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
         if learning_starts is None:
             learning_starts = _default_learning_starts(rl_zoo3.ALGOS[self.algo])
         if learning_starts is not None:
-            check_training_budget(
-                self.n_timesteps,
-                learning_starts,
-                f"n_timesteps={self.n_timesteps}",
-                "raise n_timesteps (-n) or lower learning_starts (-params learning_starts:<steps>)",
-            )
+            try:
+                check_training_budget(
+                    self.n_timesteps,
+                    learning_starts,
+                    f"n_timesteps={self.n_timesteps}",
+                    "raise n_timesteps (-n) or lower learning_starts (-params learning_starts:<steps>)",
+                )
+            except ValueError as error:  # python -m sb3_dtdpg.train prints it as one error line
+                raise HyperparameterError(str(error)) from None
         self.eval_env_kwargs = {**self.env_kwargs, **(self._eval_env_kwargs_args or {})}
         if self.algo == ALGO_NAME and not self.optimize_hyperparameters:
             hyperparams.setdefault("curriculum_save_path", self.save_path)

@@ -24,11 +24,13 @@ def zoo_train(tmp_path, *args):
     [
         ("  learnin_rate: 0.001\n", "unknown hyperparameter 'learnin_rate' for DTDPG (env Pendulum-v1 in "),
         ('  policy_kwargs: "dict(net_arch=[100000, 100000])"\n', "more than the 20,000,000 allowed"),
+        ("  learning_starts: 5000\n", "n_timesteps=1000 cannot train: the first gradient step comes after"),
     ],
 )
 def test_a_bad_hyperparameter_file_is_one_error_line(tmp_path, entry, message):
     config = tmp_path / "bad.yml"
-    config.write_text("Pendulum-v1:\n  n_timesteps: 1000\n  policy: MlpPolicy\n  learning_starts: 100\n" + entry)
+    default_start = "" if "learning_starts" in entry else "  learning_starts: 100\n"
+    config.write_text("Pendulum-v1:\n  n_timesteps: 1000\n  policy: MlpPolicy\n" + default_start + entry)
     done = zoo_train(tmp_path, "--conf-file", str(config))
     assert done.returncode == 2, done.stderr[-2000:]
     assert "Traceback" not in done.stderr
