@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 
+import pandas as pd
 import pytest
 
 from sb3_dtdpg.cli import main
@@ -118,42 +119,37 @@ def test_a_diverged_run_records_its_failure_and_leaves_no_checkpoint_behind(tmp_
 
 # ---------------------------------------------------------------------------------------------- failed runs
 def test_a_job_whose_runs_failed_says_so_in_its_table_and_its_exit_status(tmp_path, capsys):
-    specs = compare_specs(BUDGETS["_micro"], 1, algos=("ddpg",))
-    blocked = specs[1].run_id
+    job = dict(budget="_micro", seeds=2, algos=["ddpg"], modes=["noma"], n_workers=1, progress=False)
+    blocked = compare_specs(BUDGETS["_micro"], 2, algos=("ddpg",), modes=("noma",))[1].run_id
     (tmp_path / "runs").mkdir()
     (tmp_path / "runs" / blocked).write_text("")  # a file where the run's folder goes: the run fails, the other trains
     with pytest.raises(RunsFailedError, match=rf"1 run failed \({blocked}: FileExistsError") as failure:
-        run_compare(tmp_path, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
-    assert list(failure.value.failed) == [blocked]
-    table = (tmp_path / "results.md").read_text()
-    assert f"**Incomplete: 1 of 2 runs failed ({blocked});" in table
-    runs = (tmp_path / "results_runs.csv").read_text()
-    assert blocked == "ddpg_oma_s0_goal" and "\nddpg_noma_goal," in runs and "\nddpg_oma_goal," not in runs
+        run_compare(tmp_path, **job)
+    assert list(failure.value.failed) == [blocked] and blocked == "ddpg_noma_s1_goal"
+    assert f"**Incomplete: 1 of 2 runs failed ({blocked});" in (tmp_path / "results.md").read_text()
+    runs = pd.read_csv(tmp_path / "results_runs.csv")
+    assert list(runs["seed"]) == [0]  # the finished run's row is kept
     # the same job again trains the failed run only, and its table is whole
     (tmp_path / "runs" / blocked).unlink()
-    run_compare(tmp_path, budget="_micro", seeds=1, algos=["ddpg"], n_workers=1, progress=False)
+    run_compare(tmp_path, **job)
     assert "Incomplete" not in (tmp_path / "results.md").read_text()
     assert " s for 1 runs, 1 already done)" in capsys.readouterr().out
-
-
-def test_a_run_given_twice_runs_once(tmp_path):
-    spec = dataclasses.replace(SPEC, episodes=3)
-    report = run_many([spec, spec], tmp_path, n_workers=2, progress=False)
-    assert report.finished == [spec.run_id] and not report.failed
+    # a run given twice runs once (two workers must never write one run's folder)
+    spec = compare_specs(BUDGETS["_micro"], 1, algos=("ddpg",), modes=("noma",))[0]
+    assert run_many([spec, spec], tmp_path, progress=False).skipped == [spec.run_id]
     with pytest.raises(ValueError, match=rf"two runs share the id '{spec.run_id}' with other settings"):
-        run_many([spec, dataclasses.replace(spec, eval_episodes=2)], tmp_path / "other", progress=False)
+        run_many([spec, dataclasses.replace(spec, eval_episodes=9)], tmp_path, progress=False)
     # compare with an algorithm and a mode given twice: one row each (was a pandas error after training)
-    summary = run_compare(
-        tmp_path / "compare", budget="_micro", seeds=1, algos=["ddpg", "ddpg"], modes=["noma", "noma"], progress=False
-    )
+    summary = run_compare(tmp_path, **{**job, "algos": ["ddpg", "ddpg"], "modes": ["noma", "noma"]})
     assert list(summary["algorithm"]).count("DDPG") == 1
 
 
 def test_the_cli_exits_with_status_1_when_runs_failed(tmp_path, capsys):
     (tmp_path / "runs").write_text("")  # no run can make its folder
-    assert main(["compare", "--budget", "tiny", "--algos", "ddpg", "--out", str(tmp_path), "--no-progress"]) == 1
+    command = ["compare", "--budget", "tiny", "--algos", "ddpg", "--multiple-access", "noma", "--no-progress"]
+    assert main([*command, "--out", str(tmp_path)]) == 1
     error = capsys.readouterr().err
-    assert "sb3-dtdpg compare: error: 4 runs failed (" in error and "hold only the runs that finished" in error
+    assert "sb3-dtdpg compare: error: 2 runs failed (" in error and "hold only the runs that finished" in error
 
 
 # ---------------------------------------------------------------------------------------------- SIGKILL
