@@ -144,6 +144,23 @@ def test_a_job_whose_runs_failed_says_so_in_its_table_and_its_exit_status(tmp_pa
     assert list(summary["algorithm"]).count("DDPG") == 1
 
 
+def test_reproduce_reports_the_runs_that_finished_when_others_failed(tmp_path):
+    from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
+
+    specs = [s for s in reproduce_specs(BUDGETS["_micro"], 1)["ddpg_vs_dtdpg"] if s.multiple_access == "noma"]
+    blocked = next(s.run_id for s in specs if s.algo == "ddpg")
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / blocked).write_text("")
+    # DT-DPG alone finishes: no contrast has both sides (this once crashed the report after the runs)
+    with pytest.raises(RunsFailedError, match=rf"1 run failed \({blocked}: "):
+        run_reproduce(
+            tmp_path, budget="_micro", seeds=1, progress=False, experiments=["ddpg_vs_dtdpg"], multiple_access=["noma"]
+        )
+    table = (tmp_path / "ddpg_vs_dtdpg.md").read_text()
+    assert f"**Incomplete: 1 of 2 runs failed ({blocked});" in table and "| DT-DPG | NOMA |" in table
+    assert "Incomplete" not in (tmp_path / "table_ii.md").read_text()  # its runs (the DT-DPG one) all finished
+
+
 def test_the_cli_exits_with_status_1_when_runs_failed(tmp_path, capsys):
     (tmp_path / "runs").write_text("")  # no run can make its folder
     command = ["compare", "--budget", "tiny", "--algos", "ddpg", "--multiple-access", "noma", "--no-progress"]

@@ -80,14 +80,16 @@ class RunReport:
 
     def incomplete_note(self, run_ids: Iterable[str] | None = None) -> str | None:
         """
-        :param run_ids: the runs of one table (None: every run of the job)
+        :param run_ids: the runs of one table (None: every run of the job); those the job was not asked for (another
+            mode or experiment) are not counted
         :return: the line under a table whose runs failed (None when none of them did)
         """
         ids = None if run_ids is None else set(run_ids)
         failed = [run_id for run_id in self.failed if ids is None or run_id in ids]
         if not failed:
             return None
-        total = len(self.finished) + len(self.skipped) + len(self.failed) if ids is None else len(ids)
+        handled = {*self.finished, *self.skipped, *self.failed}  # the runs this job was asked for
+        total = len(handled) if ids is None else len(ids & handled)
         return (
             f"Incomplete: {len(failed)} of {total} runs failed ({', '.join(failed)}); the table holds only the runs "
             "that finished, and the same command again trains the failed ones"

@@ -203,9 +203,10 @@ def _paired_table(
         ("learning_rate", base_lr, other_lr, ("algorithm", "multiple_access", "approach")),
     ]
     parts = [tables.paired_differences(rec, column, a, b, by) for column, a, b, by in contrasts]
-    paired = pd.concat([p for p in parts if not p.empty], ignore_index=True)
-    if paired.empty:
+    parts = [p for p in parts if not p.empty]
+    if not parts:  # no contrast has both sides (e.g. one algorithm and one mode finished)
         return None
+    paired = pd.concat(parts, ignore_index=True)
     columns = ("algorithm", "multiple_access", "approach", "learning_rate")
     (out / "paired.md").write_text(
         f"# The paper's claims as paired differences ({budget.name} budget; E = {budget.episodes}, "
