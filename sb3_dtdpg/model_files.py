@@ -70,7 +70,16 @@ class SavedModel:
         check_settings(self.settings, env, f"the model {self.path}")
         # verbose 0: a model saved with verbose=1 (the RL Zoo's) would print SB3's env-wrapping notice on load
         custom_objects = {"verbose": 0, **self.custom_objects}
-        return algorithm_class(self.algo).load(self.path, env=env, device="cpu", custom_objects=custom_objects)
+        try:
+            return algorithm_class(self.algo).load(self.path, env=env, device="cpu", custom_objects=custom_objects)
+        except ValueError as error:
+            if self.settings or "spaces do not match" not in str(error):
+                raise
+            # No mission settings recorded (SB3's own model.save): most likely not a model of the mission envs
+            raise ValueError(
+                f"{error}: the model {self.path} records no NomaRadioMap settings; if it was not trained on a mission "
+                "env, evaluate and enjoy cannot test it (they run the NomaRadioMap test missions)"
+            ) from None
 
 
 def _model_path(path: str | Path) -> Path:

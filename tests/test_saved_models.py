@@ -145,6 +145,15 @@ def test_evaluate_and_enjoy_refuse_bad_outputs_and_envs_before_running(saved_dtd
     assert file.read_text() == "kept"
 
 
+def test_evaluate_of_a_model_of_another_env_says_it_records_no_mission_settings(tmp_path, capsys):
+    from stable_baselines3 import DDPG
+
+    DDPG("MlpPolicy", "Pendulum-v1").save(tmp_path / "pendulum.zip")
+    code, printed = run_cli(["evaluate", str(tmp_path / "pendulum.zip")], capsys)
+    assert code == 2 and "Traceback" not in printed.err
+    assert "Observation spaces do not match" in printed.err and "records no NomaRadioMap settings" in printed.err
+
+
 def test_settings_of_a_model_without_a_record_come_from_its_run_or_its_observation_length(tmp_path):
     from sb3_dtdpg.model_files import read_saved_model
 
