@@ -524,12 +524,14 @@ _threads = _checked(int, lambda n: n >= 0, "0 (torch's default) or a positive nu
 _positive = _checked(int, lambda n: n >= 1, "a positive integer")
 
 
-def _file_on_the_way(folder: Path) -> Path | None:
-    """:return: the file that stands where ``folder`` or a folder above it would be, or None when there is none"""
+def _check_no_file_on_the_way(value: str, folder: Path) -> None:
+    """:raises argparse.ArgumentTypeError: a file stands where ``folder`` (of the option's ``value``) or a folder above
+    it would be"""
     for part in (folder, *folder.parents):
         if part.exists():
-            return None if part.is_dir() else part
-    return None
+            if not part.is_dir():
+                raise argparse.ArgumentTypeError(f"{value!r}: {str(part)!r} is a file, expected a folder")
+            return
 
 
 def _output_file(suffixes: tuple[str, ...]) -> Any:
@@ -538,9 +540,7 @@ def _output_file(suffixes: tuple[str, ...]) -> Any:
             raise argparse.ArgumentTypeError(f"expected a {' or '.join(suffixes)} file, got {value!r}")
         if Path(value).is_dir():
             raise argparse.ArgumentTypeError(f"{value!r} is a folder, expected a file name")
-        blocking = _file_on_the_way(Path(value).parent)
-        if blocking is not None:
-            raise argparse.ArgumentTypeError(f"{value!r}: {str(blocking)!r} is a file, expected a folder")
+        _check_no_file_on_the_way(value, Path(value).parent)
         return value
 
     return check
@@ -548,9 +548,7 @@ def _output_file(suffixes: tuple[str, ...]) -> Any:
 
 def _output_folder(value: str) -> str:
     """An output folder: it may not exist yet, but no part of its path may be a file."""
-    blocking = _file_on_the_way(Path(value))
-    if blocking is not None:
-        raise argparse.ArgumentTypeError(f"{value!r}: {str(blocking)!r} is a file, expected a folder")
+    _check_no_file_on_the_way(value, Path(value))
     return value
 
 

@@ -20,7 +20,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvO
 
 import noma_radiomap  # noqa: F401  (registers the ids)
 from noma_radiomap.core import MissionStep
-from noma_radiomap.vector import MissionView, NomaRadioMapVecEnv
+from noma_radiomap.vector import MissionView, NomaRadioMapVecEnv, check_num_envs
 
 
 class MissionVecEnv(VecEnv):
@@ -166,8 +166,7 @@ def make_mission_vec_env(
     :param monitor: wrap in ``VecMonitor``
     :return: the vector env
     """
-    if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
-        raise ValueError(f"n_envs must be an integer >= 1, got {n_envs!r}")
+    check_num_envs(n_envs, "n_envs")
     env: VecEnv = MissionVecEnv.from_id(env_id, n_envs, **(env_kwargs or {}))
     if seed is not None:
         env.seed(seed)

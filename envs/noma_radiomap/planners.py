@@ -531,16 +531,16 @@ def _clear_segments(a: np.ndarray, b: np.ndarray, padded: np.ndarray, resolution
 _MAX_SEGMENTS = 20_000_000
 
 
-def _corners(blocked: np.ndarray, resolution: float) -> np.ndarray:
+def _corners(padded: np.ndarray, resolution: float) -> np.ndarray:
     """
     The corners a shortest path around the obstacles can bend at: a shortest path in the free region (a union of
     grid cells) is a polygonal line bending only at convex corners of the obstacles, grid points where one of the
     four cells meeting there is blocked, or two diagonal ones (a pinch the motion model does not pass; the
-    relaxation may). Cells outside the room count as blocked.
+    relaxation may).
 
+    :param padded: the blocked cells with a blocked border (the room's outside counts as blocked)
     :return: the corners (C, 2) in metres
     """
-    padded = np.pad(blocked, 1, constant_values=True)
     quads = np.stack([padded[:-1, :-1], padded[1:, :-1], padded[:-1, 1:], padded[1:, 1:]])
     count = quads.sum(axis=0)
     pinch = (count == 2) & (quads[0] == quads[3])
@@ -561,7 +561,7 @@ def _corner_graph(
     """
     blocked = np.frombuffer(blocked_bytes, dtype=bool).reshape(shape)
     padded = np.pad(blocked, 1, constant_values=True)
-    corners = _corners(blocked, resolution)
+    corners = _corners(padded, resolution)
     if len(corners) ** 2 > _MAX_SEGMENTS:
         return None
     lengths = np.hypot(*(corners[:, None, :] - corners[None, :, :]).transpose(2, 0, 1))

@@ -22,7 +22,7 @@ from noma_radiomap.env import NomaRadioMapEnv
 from noma_radiomap.observations import observation_space
 from noma_radiomap.scenario import Scenario
 
-__all__ = ["MissionView", "NomaRadioMapVecEnv", "make_vec_env"]
+__all__ = ["MissionView", "NomaRadioMapVecEnv", "check_num_envs", "make_vec_env"]
 
 
 class MissionView:
@@ -89,6 +89,12 @@ class MissionView:
         return getattr(NomaRadioMapEnv, name)
 
 
+def check_num_envs(value: Any, name: str = "num_envs") -> None:
+    """:raises ValueError: ``value`` is not an integer >= 1 (a number of missions), naming ``name`` and the value"""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+
+
 class NomaRadioMapVecEnv(VectorEnv):
     """
     ``num_envs`` missions of :class:`~noma_radiomap.NomaRadioMapEnv` stepped at once with array operations
@@ -147,8 +153,7 @@ class NomaRadioMapVecEnv(VectorEnv):
                 "single env, noma_radiomap.wrappers.PowerShares); use gymnasium.make_vec(..., vectorization_mode='sync') "
                 "or one env"
             )
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        check_num_envs(num_envs)
         if render_mode is not None:
             raise ValueError(f"render_mode: the vector env does not render (use a single env), got {render_mode!r}")
         #: The mission engine, N missions (:class:`noma_radiomap.core.MissionCore`)
