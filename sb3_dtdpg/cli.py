@@ -144,13 +144,14 @@ def _cmd_map(args: argparse.Namespace) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     from noma_radiomap import RadioMap, load_scenario
     from sb3_dtdpg.common.files import safe_name
+    from sb3_dtdpg.experiments.plots import save_and_close
 
     scenario = load_scenario(args.scenario)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     radio_map = RadioMap.for_scenario(scenario)
     path = out / f"maps_{safe_name(scenario.name)}.png"  # the name is user text: never a path
-    radio_map.plot_maps(str(path))
+    save_and_close(radio_map.plot_maps(), path)
     print(f"wrote {path} (outage share with full power to one robot: {100 * radio_map.outage_share():.1f} % of free cells)")
     return 0
 
@@ -435,6 +436,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     import pandas as pd
 
+    from sb3_dtdpg.common.files import write_csv, write_text
     from sb3_dtdpg.evaluation import evaluate
     from sb3_dtdpg.experiments import tables
 
@@ -452,13 +454,11 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     )
     tables.print_table(summary, title)
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         document = {"model": str(args.model), "settings": settings, "summary": result.summary(), "episodes": result.episodes}
-        Path(args.json).write_text(json.dumps(document, indent=2, default=float) + "\n")
+        write_text(args.json, json.dumps(document, indent=2, default=float) + "\n")
         print(f"wrote {args.json}")
     if args.csv:
-        Path(args.csv).parent.mkdir(parents=True, exist_ok=True)
-        pd.DataFrame(result.episodes).to_csv(args.csv, index=False)
+        write_csv(args.csv, pd.DataFrame(result.episodes))
         print(f"wrote {args.csv} (one row per test episode)")
     return 0
 

@@ -19,6 +19,7 @@ from typing import Any
 import yaml
 
 from sb3_dtdpg import presets
+from sb3_dtdpg.common.files import write_text
 from sb3_dtdpg.common.phases import Phase
 
 __all__ = ["FILES", "MISSION_IDS", "N_TIMESTEPS", "write_zoo_files", "zoo_entries", "zoo_text"]
@@ -144,7 +145,7 @@ def write_zoo_files(folder: str | Path) -> list[Path]:
     written = []
     for name in FILES:
         path = folder / f"{name}.yml"
-        path.write_text(zoo_text(name))
+        write_text(path, zoo_text(name))
         written.append(path)
     return written
 

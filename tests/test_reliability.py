@@ -8,6 +8,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -319,6 +320,42 @@ def test_atomic_write_leaves_no_temp_file_when_interrupted(tmp_path):
     assert target.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == ["model.zip"]
     atomic_write(target, lambda path: open(path, "wb").write(b"new"))
     assert target.read_bytes() == b"new" and sorted(p.name for p in tmp_path.iterdir()) == ["model.zip"]
+
+
+def test_tables_and_figures_are_replaced_whole_or_not_at_all(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from noma_radiomap.planners import RandomPlanner
+    from sb3_dtdpg.common.files import save_figure
+    from sb3_dtdpg.evaluation import evaluate
+    from sb3_dtdpg.experiments import tables
+
+    result = evaluate(RandomPlanner(seed=0), "NomaRadioMap-v0", n_episodes=2, env_kwargs={"scenario": "small"})
+    summary = pd.DataFrame([tables.planner_row("random", "noma", result)])
+    tables.save_tables(summary, pd.DataFrame(), tmp_path, "results", "old")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+
+    def interrupted(frame, path, **kwargs):
+        Path(path).write_text("algorithm,mult")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        tables.save_tables(summary.assign(mqi_mean=1.0), pd.DataFrame(), tmp_path, "results", "new")
+    monkeypatch.undo()
+    # results.md is the new one (written first), results.csv the old one whole, no temporary file left
+    assert (tmp_path / "results.md").read_text().startswith("# new")
+    assert (tmp_path / "results.csv").read_bytes() == before["results.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results.csv", "results.md"]
+    # A figure is written in its extension's format, though the temporary file ends in .tmp.
+    figure = plt.figure()
+    for name, magic in (("f.png", b"\x89PNG"), ("f.pdf", b"%PDF"), ("f.SVG", b"<?xml")):
+        assert save_figure(figure, tmp_path / name).read_bytes().startswith(magic)
+    plt.close(figure)
 
 
 def test_remove_temp_files_keeps_everything_else(tmp_path):

@@ -12,7 +12,17 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["TEMP_PREFIX", "atomic_write", "json_default", "remove_temp_files", "safe_name", "write_json"]
+__all__ = [
+    "TEMP_PREFIX",
+    "atomic_write",
+    "json_default",
+    "remove_temp_files",
+    "safe_name",
+    "save_figure",
+    "write_csv",
+    "write_json",
+    "write_text",
+]
 
 #: Temporary files are named ``.<target>.<random>.tmp`` in the target's folder.
 TEMP_PREFIX = "."
@@ -70,8 +80,42 @@ def write_json(path: str | os.PathLike[str], data: Any, indent: int | None = Non
     :param indent: ``json.dumps``'s indent
     :return: the target path
     """
-    text = json.dumps(data, indent=indent, default=json_default)
+    return write_text(path, json.dumps(data, indent=indent, default=json_default))
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """
+    Write a text file atomically (:func:`atomic_write`).
+
+    :param path: the target file
+    :param text: its content
+    :return: the target path
+    """
     return atomic_write(path, lambda tmp: Path(tmp).write_text(text))
+
+
+def write_csv(path: str | os.PathLike[str], frame: Any) -> Path:
+    """
+    Write a table as CSV, without its index, atomically (:func:`atomic_write`).
+
+    :param path: the target file
+    :param frame: a ``pandas.DataFrame``
+    :return: the target path
+    """
+    return atomic_write(path, lambda tmp: frame.to_csv(tmp, index=False))
+
+
+def save_figure(figure: Any, path: str | os.PathLike[str], **kwargs: Any) -> Path:
+    """
+    Save a matplotlib figure atomically (:func:`atomic_write`), in the format its file extension names.
+
+    :param figure: the figure
+    :param path: the target file (``.png``, ``.pdf``, ``.svg``, ...)
+    :param kwargs: ``Figure.savefig``'s options (e.g. ``dpi``)
+    :return: the target path
+    """
+    file_format = Path(path).suffix.lstrip(".").lower() or None  # the temporary file ends in .tmp
+    return atomic_write(path, lambda tmp: figure.savefig(tmp, format=file_format, **kwargs))
 
 
 def remove_temp_files(folder: str | os.PathLike[str]) -> list[Path]:

@@ -200,6 +200,24 @@ def mission_bound(env_id: str, mode: str, n_episodes: int, eval_seed: int, env_k
     return float(sum(bounds) / len(bounds))
 
 
+def _check_arguments(algos: Sequence[str], modes: Sequence[str], hyperparams: str, observation: str, seeds: int) -> None:
+    """:raises ValueError: naming the first bad argument of :func:`run_compare`, before any run starts"""
+    from noma_radiomap.registration import check_observation
+    from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
+
+    unknown = [a for a in algos if a not in ALGORITHMS]
+    if unknown:
+        raise ValueError(f"algos: unknown algorithm(s) {unknown}, expected some of {ALGORITHMS}")
+    bad_modes = [m for m in modes if m not in ("noma", "oma")]
+    if bad_modes:
+        raise ValueError(f"modes: expected 'noma' and/or 'oma', got {bad_modes}")
+    for algo in algos:
+        check_hyperparams(algo, hyperparams)
+    check_observation(observation)
+    if seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds!r}")
+
+
 def run_compare(
     out: str | Path = "results/compare",
     budget: str | Budget = "default",
@@ -235,26 +253,14 @@ def run_compare(
         scenario or hyperparameters): use another folder
     :raises RunsFailedError: runs failed; the tables and figures of the runs that finished are written first
     """
-    from noma_radiomap.registration import check_observation
-    from sb3_dtdpg.baselines import ALGORITHMS, check_hyperparams
     from sb3_dtdpg.experiments import plots, tables
 
     budget = get_budget(budget)
     if scenario is not None:
         budget = dataclasses.replace(budget, scenario=scenario)
     algos, modes = list(dict.fromkeys(algos)), list(dict.fromkeys(modes))  # a name given twice is one run per seed
-    unknown = [a for a in algos if a not in ALGORITHMS]
-    if unknown:
-        raise ValueError(f"algos: unknown algorithm(s) {unknown}, expected some of {ALGORITHMS}")
-    bad_modes = [m for m in modes if m not in ("noma", "oma")]
-    if bad_modes:
-        raise ValueError(f"modes: expected 'noma' and/or 'oma', got {bad_modes}")
-    for algo in algos:
-        check_hyperparams(algo, hyperparams)  # before any run
-    check_observation(observation)
     seeds = budget.seeds if seeds is None else seeds
-    if seeds < 1:
-        raise ValueError(f"seeds must be >= 1, got {seeds!r}")
+    _check_arguments(algos, modes, hyperparams, observation, seeds)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
@@ -278,13 +284,13 @@ def run_compare(
             f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seed{'s' if seeds != 1 else ''}, "
             f"{hyperparams} hyperparameters, {observation} observation)"
         )
-        tables.save_tables(summary, records, out, "results", title, incomplete=report.incomplete_note())
-        tables.print_table(summary, title)
+        margins = []  # the room's margins need both modes' planners
         if set(modes) == {"noma", "oma"}:
-            margins = format_room_margins(room_margins(planner_rows, budget, env_id, planner_instances))
-            print(margins)
-            with open(out / "results.md", "a") as markdown:
-                markdown.write(f"{margins}.\n")
+            margins.append(format_room_margins(room_margins(planner_rows, budget, env_id, planner_instances)))
+        tables.save_tables(summary, records, out, "results", title, incomplete=report.incomplete_note(), extra_notes=margins)
+        tables.print_table(summary, title)
+        for line in margins:
+            print(line)
         if not records.empty:
             plots.plot_statistics(
                 records, out, f"{budget.scenario or 'mall'}, {budget.name} budget ({budget.episodes} episodes)"

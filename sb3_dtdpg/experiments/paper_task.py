@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sb3_dtdpg.common.files import write_csv, write_text
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import plots, tables
 from sb3_dtdpg.experiments.budgets import Budget
@@ -227,10 +228,10 @@ def write_tables(
         heading, _, body = text.partition("\n\n")
         text = f"{heading}\n\n**{incomplete}.**\n\n{body}"
     name = table_name(channel)
-    (out / f"{name}.md").write_text(text)
-    summary.to_csv(out / f"{name}.csv", index=False)
-    records.to_csv(out / f"{name}_runs.csv", index=False)
-    paired.to_csv(out / f"{name}_paired.csv", index=False)
+    write_text(out / f"{name}.md", text)
+    write_csv(out / f"{name}.csv", summary)
+    write_csv(out / f"{name}_runs.csv", records)
+    write_csv(out / f"{name}_paired.csv", paired)
     if progress:
         print(text)
     return summary

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sb3_dtdpg.common.files import save_figure
 from sb3_dtdpg.experiments.aggregate import (
     iqm,
     performance_profile,
@@ -334,11 +335,23 @@ def _mission_regions(ax: Any, scenario: Any) -> None:
 
 def _save(fig: Any, path: str | Path, title: str | None) -> Any:
     """Add the title, write the figure to ``path`` and release it; return the figure."""
-    import matplotlib.pyplot as plt
-
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=120)
+    return save_and_close(fig, path)
+
+
+def save_and_close(fig: Any, path: str | Path, dpi: int = 120) -> Any:
+    """
+    Write a figure atomically (:func:`sb3_dtdpg.common.files.save_figure`) and release its memory.
+
+    :param fig: the figure
+    :param path: the file (format by extension)
+    :param dpi: its resolution
+    :return: the figure
+    """
+    import matplotlib.pyplot as plt
+
+    save_figure(fig, path, dpi=dpi)
     plt.close(fig)
     return fig
 

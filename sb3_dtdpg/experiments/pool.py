@@ -15,7 +15,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -65,13 +65,26 @@ def worker_pool(n_workers: int) -> ProcessPoolExecutor:
 class RunReport:
     """
     What :func:`sb3_dtdpg.experiments.runs.run_many` did: run ids finished now, skipped (already finished) and
-    failed (with the error).
+    failed (with the error); or, for a job that only reports (:meth:`of_stored`), the runs with a stored result
+    (skipped) and those without one (missing).
     """
 
     finished: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)
     wall_s: float = math.nan
+    missing: list[str] = field(default_factory=list)
+
+    @classmethod
+    def of_stored(cls, results: Mapping[str, Any]) -> RunReport:
+        """
+        :param results: per run id, its stored result (None: none)
+        :return: the report of a job that trained nothing: the runs without a result are missing
+        """
+        return cls(
+            skipped=[run_id for run_id, result in results.items() if result is not None],
+            missing=[run_id for run_id, result in results.items() if result is None],
+        )
 
     def counts(self) -> str:
         """:return: e.g. ``"4 runs, 2 already done, 1 failed"`` (the failed only when runs failed)"""
@@ -86,13 +99,20 @@ class RunReport:
         """
         ids = None if run_ids is None else set(run_ids)
         failed = [run_id for run_id in self.failed if ids is None or run_id in ids]
-        if not failed:
+        missing = [run_id for run_id in self.missing if ids is None or run_id in ids]
+        if not failed and not missing:
             return None
-        handled = {*self.finished, *self.skipped, *self.failed}  # the runs this job was asked for
+        handled = {*self.finished, *self.skipped, *self.failed, *self.missing}  # the runs this job was asked for
         total = len(handled) if ids is None else len(ids & handled)
+        if failed:
+            return (
+                f"Incomplete: {len(failed)} of {total} runs failed ({', '.join(failed)}); the table holds only the runs "
+                "that finished, and the same command again trains the failed ones"
+            )
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
         return (
-            f"Incomplete: {len(failed)} of {total} runs failed ({', '.join(failed)}); the table holds only the runs "
-            "that finished, and the same command again trains the failed ones"
+            f"Incomplete: {len(missing)} of {total} runs have no result yet ({', '.join(missing[:3])}{more}); the table "
+            "holds only the runs that finished (the same job without --report-only trains the others)"
         )
 
     def raise_failures(self, out: str | Path) -> None:

@@ -30,6 +30,7 @@ from typing import Any
 import pandas as pd
 
 from sb3_dtdpg.baselines import base_learning_rate
+from sb3_dtdpg.common.files import write_csv, write_text
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import plots, tables
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
@@ -208,13 +209,14 @@ def _paired_table(
         return None
     paired = pd.concat(parts, ignore_index=True)
     columns = ("algorithm", "multiple_access", "approach", "learning_rate")
-    (out / "paired.md").write_text(
+    write_text(
+        out / "paired.md",
         f"# The paper's claims as paired differences ({budget.name} budget; E = {budget.episodes}, "
         f"L = {budget.long_episodes} episodes)\n\n"
         + tables.format_paired_markdown(paired, columns)
-        + "\nmean difference ± 95 % CI (t-interval over the per-seed differences); success in percentage points.\n"
+        + "\nmean difference ± 95 % CI (t-interval over the per-seed differences); success in percentage points.\n",
     )
-    paired.to_csv(out / "paired.csv", index=False)
+    write_csv(out / "paired.csv", paired)
     return paired
 
 
@@ -233,7 +235,7 @@ def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[s
             row[key], row[f"{key}_ci"] = mean_ci(part[key].dropna().to_numpy())
         rows.append(row)
     dip = pd.DataFrame(rows)
-    dip.to_csv(out / "transfer_dip.csv", index=False)
+    write_csv(out / "transfer_dip.csv", dip)
     return dip
 
 
@@ -327,6 +329,8 @@ def run_reproduce(
             for run_id, error in report.failed.items():
                 print(f"run {run_id} failed: {error}")
         results = {spec.run_id: load_result(out, spec) for spec in unique}
+        if not train:  # the tables say which runs are missing
+            report = RunReport.of_stored(results)
 
         def incomplete(name: str) -> str | None:
             return report.incomplete_note(s.run_id for s in experiments[name])
@@ -437,7 +441,7 @@ def _figures(
     from noma_radiomap import RadioMap, load_scenario
 
     scenario = load_scenario(budget.scenario or "mall")
-    RadioMap.for_scenario(scenario).plot_maps(str(out / "fig_maps.png"))
+    plots.save_and_close(RadioMap.for_scenario(scenario).plot_maps(), out / "fig_maps.png")
     where = f"{scenario.name}, {budget.name} budget: {budget.episodes} episodes"  # every title names both
 
     def dirs(name: str, **match: Any) -> dict[str, list[Path]]:

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sb3_dtdpg.common.files import write_csv, write_text
 from sb3_dtdpg.evaluation import EvaluationResult, mean_ci
 from sb3_dtdpg.experiments.aggregate import iqm, stratified_bootstrap_ci
 
@@ -391,18 +392,22 @@ def save_tables(
     title: str,
     columns: Sequence[str] = ("algorithm", "multiple_access"),
     incomplete: str | None = None,
+    extra_notes: Sequence[str] = (),
 ) -> None:
     """
-    Write ``<stem>.md`` (Markdown), ``<stem>.csv`` (summary) and ``<stem>_runs.csv`` (one row per run).
+    Write ``<stem>.md`` (Markdown), ``<stem>.csv`` (summary) and ``<stem>_runs.csv`` (one row per run), each
+    atomically (a reader sees the previous file or the new one).
 
     :param incomplete: a line saying which runs are missing (failed), written in bold under the table
+    :param extra_notes: more lines under the table, after the table's own notes
     """
     out = Path(out)
     notes = [f"**{incomplete}.**"] if incomplete else []
-    notes += [f"{note}." for note in table_notes(summary)]
-    (out / f"{stem}.md").write_text(
-        f"# {title}\n\n" + format_markdown(summary, columns) + "\n" + "".join(f"{note}\n\n" for note in notes)
+    notes += [f"{note}." for note in [*table_notes(summary), *extra_notes]]
+    write_text(
+        out / f"{stem}.md",
+        f"# {title}\n\n" + format_markdown(summary, columns) + "\n" + "".join(f"{note}\n\n" for note in notes),
     )
-    summary.to_csv(out / f"{stem}.csv", index=False)
+    write_csv(out / f"{stem}.csv", summary)
     if not records.empty:
-        records.to_csv(out / f"{stem}_runs.csv", index=False)
+        write_csv(out / f"{stem}_runs.csv", records)
