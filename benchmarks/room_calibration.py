@@ -32,7 +32,7 @@ import noma_radiomap  # noqa: F401  (registers the envs)
 from noma_radiomap.geometry import grid_distance_field
 from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner
 from sb3_dtdpg.evaluation import evaluate
-from sb3_dtdpg.experiments.compare import mission_bound
+from sb3_dtdpg.experiments.compare import mission_bound, planner_margins
 
 MIN_PATH_MARGIN = 15.0
 MIN_NOMA_MARGIN = 25.0
@@ -65,8 +65,7 @@ def measure(scenario: str = "mall", episodes: int = 20, seed: int = 10_000) -> d
                 row[f"min_difference {mode}"] = float(min(differences))
                 row[f"bound {mode}"] = mission_bound("NomaRadioMap-v0", mode, episodes, seed, {"scenario": scenario})
             env.close()
-        row["path_margin"] = row["best noma"] - row["shortest noma"]
-        row["noma_margin"] = row["best noma"] - row["best oma"]
+        row["path_margin"], row["noma_margin"] = planner_margins(row["best noma"], row["shortest noma"], row["best oma"])
         figures[channel] = row
     return figures
 

@@ -151,10 +151,24 @@ def room_margins(
     margins = {}
     for channel, rows in (("radio_map", radio_map_rows), ("rayleigh", rayleigh_rows)):
         mqi = {(row["algorithm"], row["multiple_access"]): float(row["mqi"]) for row in rows}
-        best = mqi[(BEST_PLANNER, "NOMA")]
-        margins[f"path {channel}"] = best - mqi[(SHORTEST_PATH_PLANNER, "NOMA")]
-        margins[f"noma {channel}"] = best - mqi[(BEST_PLANNER, "OMA")]
+        path, noma = planner_margins(
+            mqi[(BEST_PLANNER, "NOMA")], mqi[(SHORTEST_PATH_PLANNER, "NOMA")], mqi[(BEST_PLANNER, "OMA")]
+        )
+        margins[f"path {channel}"], margins[f"noma {channel}"] = path, noma
     return margins
+
+
+def planner_margins(best_noma: float, shortest_noma: float, best_oma: float) -> tuple[float, float]:
+    """
+    The two margins a room is calibrated for (docs/SCENARIOS.md), from the planners' mean MQIs on one channel.
+
+    :param best_noma: the best planner's MQI in NOMA
+    :param shortest_noma: the shortest-path planner's (best power split) in NOMA
+    :param best_oma: the best planner's in OMA
+    :return: what path design is worth (best - shortest path, NOMA) and what NOMA is worth (the best planner's
+        NOMA - its OMA)
+    """
+    return best_noma - shortest_noma, best_noma - best_oma
 
 
 def format_room_margins(margins: dict[str, float]) -> str:
