@@ -41,6 +41,7 @@ _ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
 _PRESETS = ("paper", "tuned")
 _OBSERVATIONS = ("goal", "destinations", "paper")
 _DEFAULT_ENV_ID = "NomaRadioMap-v0"
+_MAX_SEEDS = 1_000  # sb3_dtdpg.experiments.budgets.MAX_SEEDS
 _EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
 _PRESET_HELP = (
     "hyperparameter set. tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; "
@@ -179,17 +180,21 @@ def _train_env(args: argparse.Namespace) -> tuple[Any, bool]:
     return env, mission
 
 
+#: Constructor arguments that ``train`` sets from its own options, never from ``--hyperparams``.
+_SET_BY_OPTIONS = {"seed": "--seed", "verbose": "--verbose", "tensorboard_log": "--tb"}
+
+
 def _cmd_train(args: argparse.Namespace) -> int:
     import torch as th
 
-    from sb3_dtdpg.baselines import algorithm_class, check_hyperparams, check_training_budget, hyperparameter
+    from sb3_dtdpg.baselines import algorithm_class, check_hyperparams, check_training_budget, hyperparameter, make_model
     from sb3_dtdpg.overrides import check_constructor_kwargs
 
     args.hyperparams = _hyperparams(args, [args.algo])
     args.tb = args.tb or str(Path(args.out) / "tb")  # a run's logs live with its results, under its lock
     with _user_errors(args):
         check_hyperparams(args.algo, args.hyperparams)
-        check_constructor_kwargs(algorithm_class(args.algo), args.overrides, " (--hyperparams)")
+        check_constructor_kwargs(algorithm_class(args.algo), args.overrides, " (--hyperparams)", reserved=_SET_BY_OPTIONS)
     if "learning_rate" in args.overrides:
         if args.learning_rate is not None:
             args.error("--learning-rate and --hyperparams learning_rate:...: give the learning rate once")
@@ -197,6 +202,15 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.threads:
         th.set_num_threads(args.threads)
     env, mission = _train_env(args)
+    with _user_errors(args):  # what the constructor refuses, before anything is written
+        make_model(
+            args.algo,
+            env,
+            learning_rate=args.learning_rate,
+            hyperparams=args.hyperparams,
+            _init_setup_model=False,
+            **args.overrides,
+        )
     max_steps = int(env.unwrapped.scenario.mission.max_steps) if mission else env.spec.max_episode_steps
     if args.timesteps is None and max_steps is None:
         args.error(f"--episodes: {args.env} has no episode step limit to turn episodes into steps; give --timesteps")
@@ -251,6 +265,8 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
                 progress_bar=not args.no_progress,
                 verbose=args.verbose,
             )
+    except MemoryError as error:
+        args.error(f"not enough memory for this run ({error or 'MemoryError'}): lower buffer_size or batch_size")
     except KeyboardInterrupt:
         checkpoint = read_checkpoint(run_dir)
         if checkpoint is None:
@@ -356,11 +372,14 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     args.hyperparams = _hyperparams(args, ("dtdpg", "ddpg"))
     with _user_errors(args):
         check_hyperparams("dtdpg", args.hyperparams)
-        if not args.report_only:
-            n_seeds = budget.seeds if args.n_seeds is None else args.n_seeds
-            for specs in reproduce_specs(budget, n_seeds, args.hyperparams, args.observation).values():
-                for spec in specs:
-                    check_budget(spec)
+        n_seeds = budget.seeds if args.n_seeds is None else args.n_seeds
+        groups = reproduce_specs(budget, n_seeds, args.hyperparams, args.observation).values()
+        specs = [spec for group in groups for spec in group]
+        if args.report_only:
+            _check_finished_runs(args, specs)
+        else:
+            for spec in specs:
+                check_budget(spec)
     with _busy_folder_errors(args):
         status = _failed_runs_status(args, _run_reproduce)
     if args.budget != "paper":
@@ -372,6 +391,25 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             f"sb3-dtdpg reproduce --budget paper --out <folder>"
         )
     return status
+
+
+def _check_finished_runs(args: argparse.Namespace, specs: Sequence[Any]) -> None:
+    """
+    ``reproduce --report-only`` draws its tables from the finished runs of ``--out``: refuse a folder (missing or
+    not) that holds none of this job's, before anything is created.
+
+    :param args: the command's options
+    :param specs: the job's runs (:func:`sb3_dtdpg.experiments.reproduce.reproduce_specs`)
+    :raises ValueError: no run of ``specs`` has a result in ``--out``
+    """
+    from sb3_dtdpg.experiments.storage import result_path
+
+    if not any(result_path(args.out, spec).is_file() for spec in specs):
+        n_runs = len({spec.run_id for spec in specs})
+        raise ValueError(
+            f"--out: {args.out} holds no finished runs of this job (none of its {n_runs} runs: --budget {args.budget}, "
+            f"--preset {args.hyperparams}, --observation {args.observation}); run it without --report-only to train them"
+        )
 
 
 def _run_reproduce(args: argparse.Namespace) -> None:
@@ -416,11 +454,13 @@ def _saved_model_env(args: argparse.Namespace, channel: str) -> tuple[Any, Any, 
             where = "--env" if args.env else f"the model's env ({args.model})"
             raise ValueError(f"{where}: {args.command} runs the NomaRadioMap test missions, got {env_id}")
         settings = dict(saved.settings or {})
+        implied = _env_id_settings(args, saved)
         kwargs = saved.env_kwargs(
             channel,
             scenario=args.scenario,
             observation=args.observation or settings.get("observation") or "goal",
-            multiple_access=args.multiple_access,
+            multiple_access=args.multiple_access or implied.get("multiple_access"),
+            task=implied.get("task"),
         )
         env = gym.make(env_id, **kwargs)
         try:
@@ -429,6 +469,52 @@ def _saved_model_env(args: argparse.Namespace, channel: str) -> tuple[Any, Any, 
             env.close()
             raise
     return model, env, {**settings, **kwargs, "env_id": env_id, "algo": saved.algo}
+
+
+def _env_id_settings(args: argparse.Namespace, saved: Any) -> dict[str, Any]:
+    """
+    The settings that ``--env`` stands for: its registered downlink mode (unless ``--multiple-access`` is given,
+    which wins as in ``gymnasium.make``) and its task (``missions`` where the id names none). The env id the model's
+    run recorded stands for the model's recorded settings (a run may have overridden its id's downlink mode).
+
+    :param args: the command's options
+    :param saved: the :class:`sb3_dtdpg.model_files.SavedModel`
+    :return: the settings (empty without ``--env``), to build the test env with
+    :raises ValueError: one of them contradicts the model's recorded settings, naming the option and both values
+    """
+    import gymnasium as gym
+
+    if args.env is None or args.env == saved.env_id:  # the model's own env id: its recorded settings are what it meant
+        return {}
+    registered = gym.spec(args.env).kwargs
+    implied = {"task": registered.get("task", "missions")}
+    if args.multiple_access is None and registered.get("multiple_access") is not None:
+        implied["multiple_access"] = registered["multiple_access"]
+    recorded = saved.settings or {}
+    for key, value in implied.items():
+        if recorded.get(key) is not None and recorded[key] != value:
+            trained_on = f" on {saved.env_id}" if saved.env_id else ""
+            raise ValueError(
+                f"--env {args.env}: the env id has {key}={value!r}, but the model {saved.path} was trained{trained_on} "
+                f"with {key}={recorded[key]!r} (recorded in {saved.source}); leave --env out to test it on its own settings"
+            )
+    return implied
+
+
+def _check_output_files(args: argparse.Namespace, outputs: dict[str, str | None]) -> None:
+    """
+    Refuse output files of ``evaluate``/``enjoy`` that would overwrite the model or a record of its run (its
+    ``result.json``, ...: :func:`sb3_dtdpg.model_files.check_output_file`), before anything runs.
+
+    :param args: the command's options
+    :param outputs: the output files by option (None: not given)
+    """
+    from sb3_dtdpg.model_files import check_output_file
+
+    with _user_errors(args):
+        for option, value in outputs.items():
+            if value is not None:
+                check_output_file(option, value, args.model)
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -440,6 +526,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from sb3_dtdpg.evaluation import evaluate
     from sb3_dtdpg.experiments import tables
 
+    _check_output_files(args, {"--json": args.json, "--csv": args.csv})
     model, env, settings = _saved_model_env(args, args.channel)
     with _user_errors(args):
         result = evaluate(model, env, n_episodes=args.n_episodes, seed=args.seed, deterministic=True)
@@ -465,8 +552,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 def _cmd_enjoy(args: argparse.Namespace) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
-    from sb3_dtdpg.recording import run_mission, save_animation
+    from sb3_dtdpg.recording import animation_writer, run_mission, save_animation
 
+    if args.record:
+        _check_output_files(args, {"--record": args.record})
+        with _user_errors(args):
+            try:
+                animation_writer(args.record, args.fps)  # .mp4 needs ffmpeg: say so before the mission runs
+            except ValueError as error:
+                raise ValueError(f"--record {error}") from None
     model, env, settings = _saved_model_env(args, args.channel)
     trace = run_mission(model, env, args.seed)
     info = trace.info
@@ -480,7 +574,7 @@ def _cmd_enjoy(args: argparse.Namespace) -> int:
     if args.record:
         with _user_errors(args):
             frames = save_animation(env, trace, args.record, fps=args.fps, max_frames=args.max_frames)
-        print(f"wrote {args.record} ({frames} frames)")
+        print(f"wrote {args.record} ({frames} frame{'s' if frames != 1 else ''})")
     env.close()
     return 0
 
@@ -522,6 +616,7 @@ _seed = _checked(int, lambda n: 0 <= n <= _MAX_SEED, f"a seed in 0..{_MAX_SEED} 
 _learning_rate = _checked(float, lambda x: math.isfinite(x) and x > 0, "a positive finite learning rate")
 _threads = _checked(int, lambda n: n >= 0, "0 (torch's default) or a positive number of threads")
 _positive = _checked(int, lambda n: n >= 1, "a positive integer")
+_seed_count = _checked(int, lambda n: 1 <= n <= _MAX_SEEDS, f"a number of seeds from 1 to {_MAX_SEEDS:,}")
 
 
 def _check_no_file_on_the_way(value: str, folder: Path) -> None:
@@ -622,10 +717,14 @@ def _budget_help(default: str) -> str:
 
 def _add_seeds(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--n-seeds", type=_positive, default=None, metavar="N", help="seeds per configuration, 0..N-1 (default: the budget's)"
+        "--n-seeds",
+        type=_seed_count,
+        default=None,
+        metavar="N",
+        help="seeds per configuration, 0..N-1 (default: the budget's)",
     )
     p.add_argument(
-        "--seeds", type=_positive, dest="n_seeds", action=_DeprecatedOption, replacement="--n-seeds", help=argparse.SUPPRESS
+        "--seeds", type=_seed_count, dest="n_seeds", action=_DeprecatedOption, replacement="--n-seeds", help=argparse.SUPPRESS
     )
 
 

@@ -16,7 +16,16 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
-__all__ = ["CHECKED", "SETTINGS", "EnvSettingsMismatch", "check_settings", "infer_observation", "record", "settings_of"]
+__all__ = [
+    "CHECKED",
+    "SETTINGS",
+    "EnvSettingsMismatch",
+    "check_settings",
+    "infer_observation",
+    "record",
+    "settings_of",
+    "trained_settings",
+]
 
 #: What is recorded.
 SETTINGS: tuple[str, ...] = ("scenario", "observation", "multiple_access", "channel", "task", "power_mapping")
@@ -110,6 +119,16 @@ def record(model: Any, env: Any = None) -> dict[str, Any] | None:
     if settings is not None:
         model.env_settings = settings
     return getattr(model, "env_settings", None)
+
+
+def trained_settings(model: Any) -> dict[str, Any] | None:
+    """
+    :param model: an SB3 model (or any policy)
+    :return: the settings of the env the model trains on, else those its file recorded (:func:`record`), else None
+    """
+    get_env = getattr(model, "get_env", None)
+    settings = settings_of(get_env()) if callable(get_env) else None
+    return settings if settings is not None else getattr(model, "env_settings", None)
 
 
 def infer_observation(n_values: int, n_robots: int) -> str | None:

@@ -18,6 +18,8 @@ import gymnasium as gym
 import numpy as np
 from scipy import stats
 
+from sb3_dtdpg.env_settings import check_settings, trained_settings
+
 __all__ = ["EvaluationResult", "Planner", "evaluate", "mean_ci", "robot_positions"]
 
 
@@ -220,15 +222,22 @@ def evaluate(
     :param return_trajectories: keep every episode's robot positions in ``result.trajectories``
     :param confidence: confidence level of the intervals
     :return: the per-episode records and their summary
+    :raises sb3_dtdpg.env_settings.EnvSettingsMismatch: the model was trained with env settings (scenario,
+        observation, multiple-access mode, task, power mapping: its own env's, else those its file recorded) other
+        than the env's
     """
-    if n_episodes < 1:
-        raise ValueError(f"n_episodes must be >= 1, got {n_episodes!r}")
+    if isinstance(n_episodes, bool) or not isinstance(n_episodes, (int, np.integer)) or n_episodes < 1:
+        raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0 (episode i is reset with seed + i), got {seed!r}")
     if options is not None and not isinstance(options, dict) and len(options) != n_episodes:
         raise ValueError(f"options must be one dict or one per episode ({n_episodes}), got {len(options)} entries")
     kind = _policy_kind(policy)
     env, owned = _make_env(env_id_or_env, channel, multiple_access, env_kwargs)
     result = EvaluationResult(episodes=[], confidence=confidence)
     try:
+        # a model is only tested on an env with the settings it was trained with, as load() and set_env() check
+        check_settings(trained_settings(policy), env, f"the {type(policy).__name__} model")
         for episode in range(n_episodes):
             episode_options = options if options is None or isinstance(options, dict) else options[episode]
             obs, _ = env.reset(seed=seed + episode, options=episode_options)

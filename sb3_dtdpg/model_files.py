@@ -9,15 +9,31 @@ A model may come from ``sb3-dtdpg train``/``compare`` (``<out>/runs/<run id>/mod
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.env_settings import CHECKED, check_settings
 
-__all__ = ["SavedModel", "read_saved_model"]
+__all__ = ["RUN_RECORDS", "SavedModel", "check_output_file", "read_saved_model"]
 
 #: The algorithm of a policy class name (SB3 stores the policy class in the zip).
 _POLICY_ALGOS = {"DTDPGPolicy": "dtdpg", "TD3Policy": "td3", "SACPolicy": "sac", "TQCPolicy": "tqc"}
+#: The algorithms whose models have a policy class: SB3's DDPG is TD3 with other settings, so it has TD3's policy.
+_POLICY_FAMILIES = {"DTDPGPolicy": ("dtdpg",), "TD3Policy": ("td3", "ddpg"), "SACPolicy": ("sac",), "TQCPolicy": ("tqc",)}
+#: The files a run of ``train``/``compare``/``reproduce`` owns in its folder ``<out>/runs/<run id>/``
+#: (:mod:`sb3_dtdpg.experiments.storage`, :func:`sb3_dtdpg.experiments.runs.run_one`), besides the curriculum's
+#: ``phase_<k>_<name>.zip`` and the ``checkpoints/`` folder.
+RUN_RECORDS: tuple[str, ...] = (
+    "result.json",
+    "progress.json",
+    "checkpoint.json",
+    "failed.json",
+    "model.zip",
+    "replay_buffer.pkl",
+)
+#: The fields of a run record's ``spec`` that :func:`read_saved_model` reads (each a string, or null).
+_SPEC_FIELDS = ("algo", "scenario", "observation", "multiple_access", "channel", "task", "env_id")
 
 
 class SavedModel:
@@ -97,9 +113,11 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
     """
     :param path: a model zip, or a run folder holding ``model.zip``
     :param algo: the algorithm (None: from the run's ``result.json``, else from the zip's policy class and, for a
-        TD3 policy, the settings that tell SB3's DDPG from TD3)
+        TD3 policy, the settings that tell SB3's DDPG from TD3); refused when the run record or the policy class
+        names another one
     :return: the model file's description
-    :raises ValueError: a missing file, a file that is not an SB3 model zip, or an unknown algorithm
+    :raises ValueError: a missing file, a file that is not an SB3 model zip, an unknown algorithm, an ``algo`` that
+        contradicts the model, or a damaged ``result.json`` beside the model (one that contradicts the model)
     """
     from stable_baselines3.common.buffers import NStepReplayBuffer
     from stable_baselines3.common.save_util import load_from_zip_file
@@ -111,15 +129,9 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
         raise ValueError(f"{path}: not a Stable-Baselines3 model file ({type(error).__name__}: {error})") from None
     data = data or {}
     result_file = path.parent / "result.json"
-    spec: dict[str, Any] = {}
-    if result_file.is_file():
-        spec = json.loads(result_file.read_text()).get("spec", {})
+    spec = _run_spec(result_file) if result_file.is_file() else {}
     policy_class = getattr(data.get("policy_class"), "__name__", "")
-    algo = algo or spec.get("algo") or _POLICY_ALGOS.get(policy_class)
-    if algo == "td3" and _is_ddpg(data):
-        algo = "ddpg"
-    if algo is None:
-        raise ValueError(f"{path}: cannot tell the algorithm from its policy class {policy_class!r}; give --algo")
+    algo = _algorithm(path, data, policy_class, spec, result_file, algo)
     settings, source = data.get("env_settings"), "the model file"
     if settings is None and spec:
         settings = {
@@ -127,7 +139,7 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
             "observation": spec.get("observation", "paper"),
             "multiple_access": spec.get("multiple_access"),
             "channel": spec.get("channel"),
-            "task": spec.get("task"),
+            "task": spec.get("task") or _task_of(spec.get("env_id")),
         }
         source = str(result_file)
     if settings is None:
@@ -139,6 +151,125 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
         # the same way.
         custom_objects["replay_buffer_class"] = None
     return SavedModel(path, algo, settings, spec.get("env_id"), source, custom_objects)
+
+
+def _algorithm(
+    path: Path, data: dict[str, Any], policy_class: str, spec: dict[str, Any], result_file: Path, algo: str | None
+) -> str:
+    """
+    The algorithm of a model: the run record's, else its policy class's, checked against the one asked for.
+
+    :param path: the model zip
+    :param data: its saved attributes
+    :param policy_class: the name of its policy class
+    :param spec: its run record's ``spec`` (empty: none)
+    :param result_file: the run record, for messages
+    :param algo: the algorithm asked for (``--algo``; None: the recorded one)
+    :return: the algorithm to load the model with
+    :raises ValueError: the run record and the policy class disagree, ``algo`` contradicts them, or neither tells
+    """
+    family = _POLICY_FAMILIES.get(policy_class)  # None: a policy class of its own (a custom or zoo policy)
+    recorded = spec.get("algo")
+    if recorded is not None and family is not None and recorded not in family:
+        raise ValueError(
+            f"{result_file}: records algo {recorded!r}, but the model {path} beside it has a {policy_class} "
+            f"({' or '.join(family)}): the file is not this model's run record; move it or the model elsewhere"
+        )
+    if recorded is None and family is not None:
+        recorded = _POLICY_ALGOS[policy_class]
+        if recorded == "td3" and _is_ddpg(data):
+            recorded = "ddpg"
+    if algo is not None:
+        allowed = (spec["algo"],) if spec.get("algo") else family
+        if allowed is not None and algo not in allowed:
+            where = f"{result_file} records algo {recorded!r}" if spec.get("algo") else f"its policy class is {policy_class}"
+            raise ValueError(
+                f"--algo {algo}: the model {path} is a {recorded} model ({where}); leave --algo out or give "
+                f"--algo {' or --algo '.join(allowed)}"
+            )
+        return algo
+    if recorded is None:
+        raise ValueError(f"{path}: cannot tell the algorithm from its policy class {policy_class!r}; give --algo")
+    return recorded
+
+
+def _run_spec(result_file: Path) -> dict[str, Any]:
+    """
+    The ``spec`` of a run's record beside a model (``train``/``compare``/``reproduce`` write ``result.json``).
+
+    A JSON object without a ``spec`` is not a run record (e.g. a file of the user's) and is ignored.
+
+    :param result_file: the ``result.json`` beside the model
+    :return: its ``spec`` (empty: none)
+    :raises ValueError: naming the file and what is wrong: not JSON, not a JSON object, a ``spec`` that is not an
+        object, or a field of it that cannot be a setting (:data:`_SPEC_FIELDS`)
+    """
+    import gymnasium as gym
+
+    import noma_radiomap  # noqa: F401  (registers the env ids)
+    from sb3_dtdpg.baselines import ALGORITHMS
+
+    def damaged(reason: str) -> ValueError:
+        return ValueError(
+            f"{result_file}, the run record beside the model, {reason}; repair it, or move it or the model elsewhere "
+            "(evaluate and enjoy read the model's settings from it)"
+        )
+
+    try:
+        record = json.loads(result_file.read_text())
+    except (OSError, ValueError) as error:  # ValueError: JSONDecodeError, UnicodeDecodeError
+        raise damaged(f"is unreadable ({type(error).__name__}: {str(error)[:200]})") from None
+    if not isinstance(record, dict):
+        raise damaged(f"is a JSON {type(record).__name__}, not an object")
+    spec = record.get("spec", {})
+    if not isinstance(spec, dict):
+        raise damaged(f"has a spec that is a JSON {type(spec).__name__}, not an object")
+    for key in _SPEC_FIELDS:
+        value = spec.get(key)
+        if value is not None and not isinstance(value, str):
+            raise damaged(f"has spec.{key} = {str(json.dumps(value))[:100]}, expected a string")
+    if spec.get("algo") is not None and spec["algo"] not in ALGORITHMS:
+        raise damaged(f"has spec.algo = {spec['algo']!r}, expected one of {', '.join(ALGORITHMS)}")
+    if spec.get("env_id") is not None:
+        try:
+            gym.spec(spec["env_id"])
+        except gym.error.Error:
+            raise damaged(f"has spec.env_id = {spec['env_id']!r}, not a registered env id") from None
+    return spec
+
+
+def check_output_file(option: str, value: str | Path, model: str | Path) -> None:
+    """
+    Refuse an output file of ``evaluate``/``enjoy`` that would overwrite the model or a record of its run.
+
+    A run folder's records (:data:`RUN_RECORDS`, the curriculum's ``phase_*.zip``) are refused in the model's folder
+    whether or not it is a run folder: :func:`read_saved_model` reads a ``result.json`` beside any model as its run's.
+
+    :param option: the option, for the message (``--json``)
+    :param value: the output file
+    :param model: the model zip, or a run folder holding ``model.zip``
+    :raises ValueError: naming the option and the file
+    """
+    target, model_path = Path(value), _model_path(model)
+    if target.resolve() == model_path.resolve() or (target.exists() and os.path.samefile(target, model_path)):
+        raise ValueError(f"{option} {value}: that is the model file itself; write the results elsewhere")
+    folders = {model_path.resolve().parent}
+    if model_path.resolve().parent.parent.name == "checkpoints":  # <run folder>/checkpoints/episode_<n>/model.zip
+        folders.add(model_path.resolve().parents[2])
+    name = target.name.lower()
+    owned = name in RUN_RECORDS or (name.startswith("phase_") and name.endswith(".zip"))
+    if owned and target.resolve().parent in folders:
+        raise ValueError(
+            f"{option} {value}: {target.name} is a record of the model's run folder {target.parent} (train, compare "
+            "and reproduce own it); write the results elsewhere"
+        )
+
+
+def _task_of(env_id: str | None) -> str | None:
+    """:return: the task of a registered env id (``missions`` where the id names none), None without an id"""
+    import gymnasium as gym
+
+    return None if env_id is None else gym.spec(env_id).kwargs.get("task", "missions")
 
 
 def _is_ddpg(data: dict[str, Any]) -> bool:

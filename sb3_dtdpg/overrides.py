@@ -18,7 +18,7 @@ import difflib
 import inspect
 import itertools
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 __all__ = [
@@ -100,7 +100,13 @@ def _check_net_arch(net_arch: Any, where: str) -> None:
             )
 
 
-def check_constructor_kwargs(algo_class: type, kwargs: dict[str, Any], where: str = "", extra: Sequence[str] = ()) -> None:
+def check_constructor_kwargs(
+    algo_class: type,
+    kwargs: dict[str, Any],
+    where: str = "",
+    extra: Sequence[str] = (),
+    reserved: Mapping[str, str] | None = None,
+) -> None:
     """
     Check keyword arguments for ``algo_class(policy, env, **kwargs)`` before it is called.
 
@@ -108,18 +114,50 @@ def check_constructor_kwargs(algo_class: type, kwargs: dict[str, Any], where: st
     :param kwargs: the keyword arguments
     :param where: where they come from, for the message (e.g. ``" in zoo_configs/dtdpg.yml"``)
     :param extra: further names that are valid besides the constructor's (e.g. the zoo's own keys)
-    :raises HyperparameterError: an unknown name (with the closest known ones), a learning rate that is not a
-        positive finite number, or a ``policy_kwargs`` ``net_arch`` that is malformed or too large
+    :param reserved: names the caller sets itself, each with the option that sets it (e.g. ``{"seed": "--seed"}``)
+    :raises HyperparameterError: an unknown or reserved name (with the closest known ones or the option to use), a
+        learning rate that is not a positive finite number (or a schedule), a ``policy_kwargs`` that is not a dict or
+        whose ``net_arch`` is malformed or too large, a ``device`` torch does not know, or a numeric setting out of
+        the range :func:`sb3_dtdpg.common.checks.check_off_policy_settings` allows
     """
-    known = [name for name in inspect.signature(algo_class).parameters if name not in _NOT_KWARGS] + list(extra)
+    from sb3_dtdpg.common.checks import check_off_policy_settings
+    from sb3_dtdpg.common.phases import parse_phases
+
+    parameters = inspect.signature(algo_class).parameters
+    known = [name for name in parameters if name not in _NOT_KWARGS and not name.startswith("_")] + list(extra)
     for name in kwargs:
+        if name in (reserved or {}):
+            raise HyperparameterError(f"{name}{where}: set it with {reserved[name]}, not as a hyperparameter")
         if name not in known:
             close = difflib.get_close_matches(name, known, n=3)
             hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
             raise HyperparameterError(f"unknown hyperparameter {name!r} for {algo_class.__name__}{where}{hint}")
     rate = kwargs.get("learning_rate")
-    if isinstance(rate, bool) or (isinstance(rate, (int, float)) and not (math.isfinite(rate) and rate > 0)):
+    if rate is not None and not callable(rate) and not (_is_number(rate) and math.isfinite(rate) and rate > 0):
         raise HyperparameterError(f"learning_rate{where} must be a positive finite number, got {rate!r}")
     policy_kwargs = kwargs.get("policy_kwargs")
-    if isinstance(policy_kwargs, dict) and "net_arch" in policy_kwargs:
+    if policy_kwargs is not None and not isinstance(policy_kwargs, Mapping):
+        raise HyperparameterError(f"policy_kwargs{where} must be a dict, e.g. dict(net_arch=[64, 64]), got {policy_kwargs!r}")
+    if isinstance(policy_kwargs, Mapping) and "net_arch" in policy_kwargs:
         _check_net_arch(policy_kwargs["net_arch"], where)
+    if kwargs.get("device") is not None:
+        _check_device(kwargs["device"], where)
+    try:
+        check_off_policy_settings(f"{algo_class.__name__}{where}", kwargs)
+        if kwargs.get("phases") is not None and "phases" in parameters:  # DT-DPG's curriculum
+            parse_phases(kwargs["phases"])
+    except ValueError as error:
+        raise HyperparameterError(f"{error}{where}" if "phases" in str(error) else str(error)) from None
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _check_device(device: Any, where: str) -> None:
+    from stable_baselines3.common.utils import get_device
+
+    try:
+        get_device(device)
+    except (RuntimeError, TypeError):
+        raise HyperparameterError(f"device{where}: torch knows no device {device!r} (e.g. 'cpu', 'cuda', 'auto')") from None

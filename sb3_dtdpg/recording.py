@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MissionTrace", "record_mission", "run_mission", "save_animation"]
+__all__ = ["MissionTrace", "animation_writer", "frame_steps", "record_mission", "run_mission", "save_animation"]
 
 _ROBOT_COLORS = ("magenta", "cyan", "white", "lime", "pink", "deepskyblue")
 
@@ -59,6 +59,42 @@ def run_mission(model: Any, env: Any, seed: int, deterministic: bool = True) -> 
     return MissionTrace(np.stack(positions), np.stack(power), np.stack(outage), np.array(base.destinations), info)
 
 
+def animation_writer(path: str | Path, fps: int = 10) -> Any:
+    """
+    The matplotlib writer of a recording, checked before a mission runs (``.mp4`` needs ffmpeg).
+
+    :param path: ``.gif`` or ``.mp4``
+    :param fps: frames per second
+    :return: a ``PillowWriter`` (``.gif``) or ``FFMpegWriter`` (``.mp4``)
+    :raises ValueError: another suffix, or ``.mp4`` without ffmpeg
+    """
+    from matplotlib import animation
+
+    path = Path(path)
+    if path.suffix.lower() == ".gif":
+        return animation.PillowWriter(fps=fps)
+    if path.suffix.lower() == ".mp4":
+        if not animation.FFMpegWriter.isAvailable():
+            raise ValueError(f"{path}: writing .mp4 needs the ffmpeg program on the PATH; record a .gif instead")
+        return animation.FFMpegWriter(fps=fps)
+    raise ValueError(f"{path}: the recording must be a .gif or .mp4 file, got suffix {path.suffix!r}")
+
+
+def frame_steps(steps: int, max_frames: int) -> list[int]:
+    """
+    :param steps: the mission's steps (frame ``t`` shows the robots after ``t`` steps, ``0..steps``)
+    :param max_frames: at most this many frames (>= 1)
+    :return: the steps to draw, evenly spread, first and last included; one frame is the last step (the whole paths)
+    :raises ValueError: ``max_frames`` below 1
+    """
+    if max_frames < 1:
+        raise ValueError(f"max_frames must be >= 1, got {max_frames!r}")
+    count = min(steps + 1, max_frames)
+    if count == 1:
+        return [steps]
+    return sorted(set(np.linspace(0, steps, num=count).round().astype(int).tolist()))
+
+
 def save_animation(env: Any, trace: MissionTrace, path: str | Path, fps: int = 10, max_frames: int = 120) -> int:
     """
     Write the mission as an animation.
@@ -67,26 +103,20 @@ def save_animation(env: Any, trace: MissionTrace, path: str | Path, fps: int = 1
     :param trace: see :func:`run_mission`
     :param path: ``.gif`` or ``.mp4``
     :param fps: frames per second
-    :param max_frames: at most this many frames (long missions show every k-th step; the last is always shown)
+    :param max_frames: at most this many frames (long missions show every k-th step; the last is always shown;
+        one frame: the last step alone, :func:`frame_steps`)
     :return: the number of frames written
-    :raises ValueError: another suffix, or ``.mp4`` without ffmpeg
+    :raises ValueError: another suffix, ``.mp4`` without ffmpeg, or ``max_frames`` below 1
     """
     from matplotlib import animation
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     path = Path(path)
-    if path.suffix.lower() == ".gif":
-        writer: Any = animation.PillowWriter(fps=fps)
-    elif path.suffix.lower() == ".mp4":
-        if not animation.FFMpegWriter.isAvailable():
-            raise ValueError(f"{path}: writing .mp4 needs the ffmpeg program on the PATH; record a .gif instead")
-        writer = animation.FFMpegWriter(fps=fps)
-    else:
-        raise ValueError(f"{path}: the recording must be a .gif or .mp4 file, got suffix {path.suffix!r}")
+    writer = animation_writer(path, fps)
     base = env.unwrapped
     steps, n_robots = trace.power_w.shape
-    frames = sorted({*np.linspace(0, steps, num=min(steps + 1, max_frames)).round().astype(int).tolist(), steps})
+    frames = frame_steps(steps, max_frames)
 
     figure = Figure(figsize=(10.0, 5.2), dpi=72, layout="constrained")
     FigureCanvasAgg(figure)

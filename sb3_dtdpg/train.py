@@ -17,6 +17,8 @@ from typing import Any
 
 #: Keys of a zoo hyperparameter entry that the zoo itself reads (they never reach the model's constructor).
 ZOO_KEYS = ("noise_type", "noise_std")
+#: Constructor arguments the zoo sets from its own flags (a hyperparameter of the same name would be given twice).
+ZOO_FLAGS = {"seed": "--seed", "verbose": "--verbose", "tensorboard_log": "--tensorboard-log", "device": "--device"}
 #: The zoo's thread flag and this script's default for it: one torch thread, fastest for these small networks
 #: (torch's own default, one thread per core, trains several times slower on a machine busy with other jobs).
 THREADS_FLAG, DEFAULT_THREADS = "--num-threads", "1"
@@ -36,7 +38,7 @@ def with_default_threads(argv: list[str]) -> list[str]:
 
 def _checked_manager(base: type) -> type:
     """The zoo's experiment manager, checking the model's keyword arguments before anything is created."""
-    from sb3_dtdpg.overrides import check_constructor_kwargs
+    from sb3_dtdpg.overrides import HyperparameterError, check_constructor_kwargs
 
     class CheckedExperimentManager(base):  # type: ignore[misc, valid-type]
         def _preprocess_hyperparams(self, hyperparams: dict[str, Any]) -> tuple[Any, ...]:
@@ -45,8 +47,22 @@ def _checked_manager(base: type) -> type:
             processed, *others = super()._preprocess_hyperparams(hyperparams)
             kwargs = {key: value for key, value in processed.items() if key != "policy"}
             where = f" (env {self.env_name.gym_id} in {self.config or 'the default config'}, or -params)"
-            check_constructor_kwargs(rl_zoo3.ALGOS[self.algo], kwargs, where, extra=ZOO_KEYS)
+            check_constructor_kwargs(rl_zoo3.ALGOS[self.algo], kwargs, where, extra=ZOO_KEYS, reserved=ZOO_FLAGS)
+            self._check_env_kwargs()
             return (processed, *others)
+
+        def _check_env_kwargs(self) -> None:
+            """Build the env once with the run's env_kwargs: a bad one is an error line before the log folder exists."""
+            import gymnasium as gym
+
+            eval_kwargs = self.eval_env_kwargs or {}
+            for kwargs in [self.env_kwargs or {}] + ([eval_kwargs] if eval_kwargs != (self.env_kwargs or {}) else []):
+                try:
+                    gym.make(self.env_name.gym_id, **kwargs).close()
+                except (ValueError, TypeError) as error:
+                    raise HyperparameterError(
+                        f"env_kwargs {kwargs!r} (--env-kwargs, --eval-env-kwargs or the file): {error}"
+                    ) from None
 
     return CheckedExperimentManager
 

@@ -187,7 +187,7 @@ def test_map_and_train_commands(tmp_path):
     ("argv", "message"),
     [
         (["compare", "--budget", "huge"], "budget must be one of"),
-        (["compare", "--seeds", "0"], "positive integer"),
+        (["compare", "--seeds", "0"], "expected a number of seeds from 1 to 1,000, got '0'"),
         (["train", "--algo", "ppo"], "invalid choice"),
         (["reproduce", "--preset", "fast"], "invalid choice"),
     ],

@@ -208,3 +208,27 @@ def test_overrides_reach_a_mission_run_and_name_it(tmp_path, capsys):
     assert model.batch_size == 16 and model.policy.actor.mu[0].out_features == 8
     # Without overrides the identity is what it was before overrides existed: earlier results stay valid
     assert "overrides" not in run_identity(RunSpec("ddpg", "noma", 0, 2, scenario="small"))["spec"]
+
+
+@pytest.mark.parametrize("folder", ["missing", "empty"])
+def test_reproduce_report_only_without_finished_runs_creates_nothing(folder, tmp_path, capsys):
+    from sb3_dtdpg.experiments.reproduce import reproduce_specs
+    from sb3_dtdpg.experiments.runs import BUDGETS
+    from sb3_dtdpg.experiments.storage import result_path
+
+    out = tmp_path / "reproduce"
+    if folder == "empty":
+        out.mkdir()
+    argv = ["reproduce", "--report-only", "--out", str(out), "--no-progress"]
+    code, printed = run_cli(argv, capsys)
+    assert_one_error_line(code, printed, "reproduce", f"--out: {out} holds no finished runs of this job")
+    assert printed.out == "" and sorted(tmp_path.rglob("*")) == ([out] if folder == "empty" else [])
+    # One finished run of the job is enough to draw the report from
+    specs = [
+        spec for group in reproduce_specs(BUDGETS["tiny"], BUDGETS["tiny"].seeds, "tuned", "goal").values() for spec in group
+    ]
+    result_path(out, specs[0]).parent.mkdir(parents=True)
+    result_path(out, specs[0]).write_text("{}")
+    args = cli.build_parser().parse_args(argv)
+    args.hyperparams = "tuned"
+    cli._check_finished_runs(args, specs)

@@ -54,7 +54,7 @@ def bad_yaml(tmp_path):
         (["compare", "--budget", "_micro", "--preset", "tuned"], "3 episodes of at most 60 steps"),
         (["compare", "--budget", "_micro"], "cannot train"),  # tuned is the default
         (["reproduce", "--budget", "_micro"], "cannot train: the first gradient step comes after learning_starts=2000"),
-        (["compare", "--n-seeds", "two"], "expected a positive integer, got 'two'"),
+        (["compare", "--n-seeds", "two"], "expected a number of seeds from 1 to 1,000, got 'two'"),
     ],
 )
 def test_user_errors_are_one_line_with_status_2(argv, message, bad_yaml, capsys):
@@ -64,6 +64,40 @@ def test_user_errors_are_one_line_with_status_2(argv, message, bad_yaml, capsys)
     errors = [line for line in printed.err.splitlines() if ": error: " in line]
     assert len(errors) == 1 and errors[0].startswith(f"sb3-dtdpg {argv[0]}: error: ")
     assert message in errors[0]
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("seed:5", "seed (--hyperparams): set it with --seed, not as a hyperparameter"),
+        ("verbose:2", "verbose (--hyperparams): set it with --verbose"),
+        ("_init_setup_model:False", "unknown hyperparameter '_init_setup_model'"),
+        ("policy_kwargs:'x'", "policy_kwargs (--hyperparams) must be a dict, e.g. dict(net_arch=[64, 64]), got 'x'"),
+        ("device:'bogus'", "device (--hyperparams): torch knows no device 'bogus'"),
+        ("learning_rate:'lin_0.001'", "learning_rate (--hyperparams) must be a positive finite number, got 'lin_0.001'"),
+        ("gamma:5", "gamma must be a number in [0, 1], got 5"),
+        ("phases:[]", "phases must hold at least one phase"),
+        ("n_steps:100000000", "n_steps must be at most buffer_size (200000), got 100000000"),
+        ("reinitialize_at_transfer:'no'", "reinitialize_at_transfer must be True or False, got 'no'"),
+    ],
+)
+def test_train_hyperparameters_the_model_refuses_are_one_line_and_create_nothing(override, message, tmp_path, capsys):
+    # each was a traceback from inside the run (n_steps: a hang), after the output folder was made
+    argv = ["train", "--algo", "dtdpg", "--scenario", "small", "--out", str(tmp_path / "out"), "--hyperparams", override]
+    code, printed = run_cli(argv, capsys)
+    assert code == 2 and "Traceback" not in printed.err
+    errors = [line for line in printed.err.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and message in errors[0], printed.err
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_seed_count_limit_is_the_jobs(capsys):
+    from sb3_dtdpg import cli
+    from sb3_dtdpg.experiments.budgets import MAX_SEEDS
+
+    assert cli._MAX_SEEDS == MAX_SEEDS  # spelled in the CLI so that --help imports nothing heavy
+    code, printed = run_cli(["compare", "--n-seeds", str(10**11)], capsys)  # was 2 GB of run specs, then a hang
+    assert code == 2 and f"expected a number of seeds from 1 to {MAX_SEEDS:,}, got '{10**11}'" in printed.err
 
 
 def test_every_option_has_help():

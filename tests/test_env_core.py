@@ -166,3 +166,39 @@ def test_a_robot_off_the_free_space_raises_before_anything_changes():
         env.step(np.zeros(3 * core.n_robots))
     for before, after in zip(state, (core.positions, core.step_counts, core.outage_steps, core.gain_db), strict=True):
         np.testing.assert_array_equal(before, after)
+
+
+# --- refused resets ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        ([{}], r"options: expected a dict of reset options \(or None\), got list"),
+        ("starts", r"options: expected a dict of reset options \(or None\), got str"),
+        ({"starts": [[1.0, 1.0], [100.0, 100.0]]}, r"options\['starts'\]\[1\]: \[100\.0, 100\.0\] is outside the room"),
+        ({"starts": [[1.0, 1.0], [1.0, 6.0]], "destinations": [[1.2, 1.2], [9.0, 4.0]]}, r"already within arrival"),
+    ],
+)
+def test_a_refused_single_env_reset_leaves_the_env_as_it_was(options, match):
+    env, twin = NomaRadioMapEnv(scenario="small", channel="rayleigh"), NomaRadioMapEnv(scenario="small", channel="rayleigh")
+    rng = np.random.default_rng(3)
+    for e in (env, twin):
+        e.reset(seed=0)
+    for _ in range(3):
+        action = rng.uniform(-1, 1, 6)
+        for e in (env, twin):
+            e.step(action)
+    generator, state = env.np_random, env.np_random.bit_generator.state
+    positions, trajectory, steps = env.positions, env.trajectory, env.step_count
+    with pytest.raises(ValueError, match=match):
+        env.reset(seed=9, options=options)
+    assert env.np_random is generator and env.np_random.bit_generator.state == state and env.core.np_randoms[0] is generator
+    np.testing.assert_array_equal(env.positions, positions)
+    np.testing.assert_array_equal(env.trajectory, trajectory)
+    assert env.step_count == steps == 3
+    for _ in range(2):  # the Rayleigh channel draws from the generator every step: the same draws as the twin's
+        action = rng.uniform(-1, 1, 6)
+        for a, b in zip(env.step(action), twin.step(action), strict=True):
+            np.testing.assert_equal(a, b)
+    np.testing.assert_array_equal(env.reset()[0], twin.reset()[0])

@@ -139,9 +139,30 @@ def test_bad_arguments_raise_clear_errors():
     env = gym.make("NomaRadioMap-v0", scenario="small", channel="radio_map")
     with pytest.raises(ValueError, match=r"channel='rayleigh'.*channel='radio_map'"):
         evaluate(StandStill(), env, n_episodes=1, channel="rayleigh")
-    with pytest.raises(ValueError, match="n_episodes"):
-        evaluate(StandStill(), env, n_episodes=0)
+    for n_episodes in (0, 2.5, "2", True):  # True once ran one episode
+        with pytest.raises(ValueError, match=f"n_episodes must be an integer >= 1, got {n_episodes!r}"):
+            evaluate(StandStill(), env, n_episodes=n_episodes)
+    for seed in (None, -1, 1.5):
+        with pytest.raises(ValueError, match=f"seed must be an integer >= 0 .*, got {seed!r}"):
+            evaluate(StandStill(), env, n_episodes=1, seed=seed)
     with pytest.raises(ValueError, match="policy"):
         evaluate(object(), env, n_episodes=1)
     with pytest.raises(ValueError, match="options"):
         evaluate(StandStill(), env, n_episodes=2, options=[MISSION])
+
+
+def test_a_model_is_only_tested_on_an_env_with_its_training_settings(tmp_path):
+    # evaluate(model, "NomaRadioMap-v0") of a model trained on `small` once ran it on `mall` and returned numbers
+    from sb3_dtdpg import DTDPG
+    from sb3_dtdpg.env_settings import EnvSettingsMismatch
+
+    model = DTDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario="small"), learning_starts=10, seed=0)
+    model.save(tmp_path / "model.zip")
+    loaded = DTDPG.load(tmp_path / "model.zip")  # no env: the settings its file recorded
+    for policy in (model, loaded):
+        with pytest.raises(EnvSettingsMismatch, match=r"scenario='small' \(the env has 'mall'\)"):
+            evaluate(policy, "NomaRadioMap-v0", n_episodes=1)
+        with pytest.raises(EnvSettingsMismatch, match=r"multiple_access='noma' \(the env has 'oma'\)"):
+            evaluate(policy, gym.make("NomaRadioMap-v0", scenario="small", multiple_access="oma"), n_episodes=1)
+        result = evaluate(policy, "NomaRadioMap-v0", n_episodes=1, env_kwargs={"scenario": "small"}, channel="radio_map")
+        assert result.n_episodes == 1

@@ -358,6 +358,18 @@ def test_tables_and_figures_are_replaced_whole_or_not_at_all(tmp_path, monkeypat
     plt.close(figure)
 
 
+@pytest.mark.parametrize("umask", [0o022, 0o027, 0o077])
+def test_atomically_written_files_get_the_mode_of_a_plain_write(tmp_path, umask):
+    # mkstemp creates its file 0600: a model or result shared through a group folder would be unreadable to the group
+    old = os.umask(umask)
+    try:
+        (tmp_path / "plain").write_text("x")
+        written = atomic_write(tmp_path / "atomic", lambda path: Path(path).write_text("x"))
+    finally:
+        os.umask(old)
+    assert oct(written.stat().st_mode & 0o777) == oct((tmp_path / "plain").stat().st_mode & 0o777) == oct(0o666 & ~umask)
+
+
 def test_remove_temp_files_keeps_everything_else(tmp_path):
     for name in (".result.json.abc.tmp", ".model.zip.x1.tmp", "model.zip", ".hidden", "notes.tmp"):
         (tmp_path / name).write_bytes(b"")

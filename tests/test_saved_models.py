@@ -225,3 +225,176 @@ def test_sb3_models_load_as_their_algorithm_without_warnings(algo, label, tmp_pa
     assert isinstance(model.replay_buffer, NStepReplayBuffer) and model.replay_buffer.n_steps == 3
     assert main(["evaluate", str(path), "--n-episodes", "1"]) == 0
     assert f"│ {label} " in capsys.readouterr().out
+
+
+@pytest.fixture
+def run_folder(saved_dtdpg, tmp_path):
+    """A run folder as train/compare write it: ``<out>/runs/<run id>/`` with ``model.zip`` and ``result.json``."""
+    import shutil
+
+    run = tmp_path / "out" / "runs" / "dtdpg_noma_s0"
+    run.mkdir(parents=True)
+    shutil.copy(saved_dtdpg, run / "model.zip")
+    spec = {
+        "algo": "dtdpg",
+        "scenario": "small",
+        "observation": "goal",
+        "multiple_access": "noma",
+        "env_id": "NomaRadioMap-v0",
+    }
+    (run / "result.json").write_text(json.dumps({"identity": {"spec": spec}, "spec": spec}))
+    return run
+
+
+def assert_one_error_line(code, printed, command, *parts):
+    assert code == 2 and "Traceback" not in printed.err and printed.out == ""  # refused before anything ran
+    errors = [line for line in printed.err.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith(f"sb3-dtdpg {command}: error: "), printed.err
+    for part in parts:
+        assert part in errors[0], errors[0]
+
+
+@pytest.mark.parametrize(
+    ("option", "name"),
+    [("--json", "result.json"), ("--json", "checkpoint.json"), ("--json", "failed.json"), ("--json", "progress.json")],
+)
+def test_evaluate_refuses_to_write_over_its_runs_records(run_folder, capsys, option, name):
+    target = run_folder / name
+    if not target.exists():
+        target.write_text('{"kept": true}')
+    stored = {path.name: path.read_bytes() for path in run_folder.iterdir()}
+    code, printed = run_cli(["evaluate", str(run_folder / "model.zip"), option, str(target)], capsys)
+    assert_one_error_line(code, printed, "evaluate", f"{option} {target}: {name} is a record of the model's run folder")
+    assert {path.name: path.read_bytes() for path in run_folder.iterdir()} == stored
+
+
+def test_evaluate_and_enjoy_refuse_to_write_over_the_model_itself(saved_dtdpg, tmp_path, capsys):
+    import shutil
+
+    for command, option, name in [
+        ("evaluate", "--csv", "model.csv"),
+        ("evaluate", "--json", "m.json"),
+        ("enjoy", "--record", "m.gif"),
+    ]:
+        model = tmp_path / name  # a model zip under another suffix: SB3 loads it all the same
+        shutil.copy(saved_dtdpg, model)
+        code, printed = run_cli([command, str(model), option, str(model)], capsys)
+        assert_one_error_line(code, printed, command, f"{option} {model}: that is the model file itself")
+        assert model.read_bytes() == saved_dtdpg.read_bytes()
+
+
+def test_the_run_records_are_the_ones_storage_writes(tmp_path):
+    from sb3_dtdpg.experiments import storage
+    from sb3_dtdpg.experiments.specs import RunSpec
+    from sb3_dtdpg.model_files import RUN_RECORDS
+
+    spec = RunSpec("dtdpg", "noma", 0, 2, scenario="small")
+    for path in (
+        storage.result_path(tmp_path, spec),
+        storage.progress_path(tmp_path, spec),
+        storage.failure_path(tmp_path, spec),
+    ):
+        assert path.name in RUN_RECORDS
+    assert {"checkpoint.json", "model.zip", "replay_buffer.pkl"} <= set(RUN_RECORDS)  # storage.save_checkpoint's
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "td3", "sac", "tqc"])
+def test_an_algo_contradicting_the_model_is_refused(saved_dtdpg, run_folder, capsys, algo):
+    code, printed = run_cli(["evaluate", str(saved_dtdpg), "--algo", algo], capsys)
+    expected = f"--algo {algo}: the model {saved_dtdpg} is a dtdpg model (its policy class is DTDPGPolicy)"
+    assert_one_error_line(code, printed, "evaluate", expected, "give --algo dtdpg")
+    code, printed = run_cli(["enjoy", str(run_folder / "model.zip"), "--algo", algo], capsys)
+    recorded = f"({run_folder / 'result.json'} records algo 'dtdpg')"
+    assert_one_error_line(code, printed, "enjoy", f"--algo {algo}: the model", recorded)
+
+
+def test_an_algo_of_the_policy_family_is_honoured(tmp_path):
+    from sb3_dtdpg.model_files import read_saved_model
+
+    path = tmp_path / "ddpg.zip"
+    DDPG("MlpPolicy", small_env(observation="goal"), learning_starts=10).save(path)
+    assert read_saved_model(path).algo == "ddpg"
+    assert read_saved_model(path, algo="td3").algo == "td3"  # SB3's DDPG is a TD3: asked for, it loads as one
+    with pytest.raises(ValueError, match=r"--algo dtdpg: the model .* is a ddpg model"):
+        read_saved_model(path, algo="dtdpg")
+
+
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [
+        ('{"spec": {"algo": "dtdpg",\n', "is unreadable (JSONDecodeError: Expecting"),
+        ("\n", "is unreadable (JSONDecodeError: Expecting value: line 2 column 1"),
+        ("[1, 2]", "is a JSON list, not an object"),
+        ('{"spec": "dtdpg"}', "has a spec that is a JSON str, not an object"),
+        ('{"spec": {"scenario": 3}}', "has spec.scenario = 3, expected a string"),
+        ('{"spec": {"algo": "ppo"}}', "has spec.algo = 'ppo', expected one of dtdpg"),
+        ('{"spec": {"env_id": "Nope-v0"}}', "has spec.env_id = 'Nope-v0', not a registered env id"),
+        ('{"spec": {"algo": "sac"}}', "records algo 'sac', but the model"),
+    ],
+    ids=["truncated", "empty", "list", "spec_str", "scenario_int", "unknown_algo", "unknown_env", "other_algo"],
+)
+@pytest.mark.parametrize("command", ["evaluate", "enjoy"])
+def test_a_damaged_run_record_beside_the_model_is_one_error_line_naming_it(run_folder, capsys, content, problem, command):
+    (run_folder / "result.json").write_text(content)
+    code, printed = run_cli([command, str(run_folder / "model.zip")], capsys)
+    assert_one_error_line(code, printed, command, f"{run_folder / 'result.json'}", problem)
+
+
+def test_a_json_object_without_a_spec_beside_the_model_is_not_a_run_record(saved_dtdpg, tmp_path):
+    import shutil
+
+    from sb3_dtdpg.model_files import read_saved_model
+
+    shutil.copy(saved_dtdpg, tmp_path / "model.zip")
+    (tmp_path / "result.json").write_text('{"model": "model.zip", "summary": {}}')  # e.g. an evaluate --json
+    saved = read_saved_model(tmp_path)
+    assert saved.algo == "dtdpg" and saved.env_id is None and saved.source == "the model file"
+
+
+@pytest.mark.parametrize(
+    ("env_id", "named"),
+    [("NomaRadioMapPaper-v0", "the env id has task='paper'"), ("NomaRadioMapOMA-v0", "the env id has multiple_access='oma'")],
+)
+@pytest.mark.parametrize("command", ["evaluate", "enjoy"])
+def test_an_env_id_contradicting_the_models_settings_is_refused(saved_dtdpg, capsys, command, env_id, named):
+    code, printed = run_cli([command, str(saved_dtdpg), "--env", env_id], capsys)
+    assert_one_error_line(code, printed, command, f"--env {env_id}: {named}", "leave --env out")
+
+
+def test_a_runs_env_id_records_its_task(tmp_path):
+    from sb3_dtdpg.model_files import read_saved_model
+
+    run = tmp_path / "runs" / "ddpg_noma_s0_paper"
+    run.mkdir(parents=True)
+    DDPG("MlpPolicy", small_env(observation="paper"), learning_starts=10).save(run / "model.zip")
+    spec = {"algo": "ddpg", "scenario": "small", "observation": "paper", "multiple_access": "noma"}
+    (run / "result.json").write_text(json.dumps({"spec": {**spec, "env_id": "NomaRadioMapPaper-v0"}}))
+    assert read_saved_model(run).settings["task"] == "paper"
+    (run / "result.json").write_text(json.dumps({"spec": {**spec, "env_id": "NomaRadioMap-v0"}}))
+    assert read_saved_model(run).settings["task"] == "missions"
+
+
+def test_enjoy_checks_the_mp4_writer_before_the_mission(saved_dtdpg, tmp_path, capsys, monkeypatch):
+    from matplotlib import animation
+
+    monkeypatch.setattr(animation.FFMpegWriter, "isAvailable", classmethod(lambda cls: False))
+    movie = tmp_path / "mission.mp4"
+    code, printed = run_cli(["enjoy", str(saved_dtdpg), "--record", str(movie)], capsys)
+    assert_one_error_line(code, printed, "enjoy", f"--record {movie}: writing .mp4 needs the ffmpeg program")
+    assert not movie.exists()
+
+
+def test_enjoy_writes_at_most_max_frames(saved_dtdpg, tmp_path, capsys):
+    gif = tmp_path / "mission.gif"
+    assert main(["enjoy", str(saved_dtdpg), "--record", str(gif), "--max-frames", "1"]) == 0
+    assert "(1 frame)" in capsys.readouterr().out
+    with Image.open(gif) as image:
+        assert image.n_frames == 1
+    from sb3_dtdpg.recording import frame_steps
+
+    assert frame_steps(60, 1) == [60] and frame_steps(60, 2) == [0, 60] and frame_steps(0, 5) == [0]
+    for max_frames in range(1, 70):
+        frames = frame_steps(60, max_frames)
+        assert len(frames) <= max_frames and frames[-1] == 60 and frames == sorted(set(frames))
+    with pytest.raises(ValueError, match="max_frames must be >= 1"):
+        frame_steps(60, 0)

@@ -1,6 +1,7 @@
 """Hostile scenarios: limits checked at load time, physical ranges, and YAML details (duplicates, typos, encodings)."""
 
 import copy
+import re
 import time
 
 import pytest
@@ -243,7 +244,8 @@ def test_the_memory_cap_is_documented_and_overridable(small_dict, monkeypatch):
     assert radiomap.MAX_MEMORY_BYTES == 2**30
     estimate = radiomap.estimated_memory(Scenario.from_dict(_big_room(small_dict, 1)))  # 1 interferer: under the cap
     assert estimate["cells"] == 4_000_000 and estimate["transmitters"] == 2
-    assert estimate["total"] == estimate["maps"] + estimate["tables"] + estimate["occlusion"] < 2**30
+    parts = estimate["maps"] + estimate["tables"] + estimate["occlusion"] + estimate["starts"]
+    assert estimate["total"] == parts < 2**30
     small = load_scenario("small")
     monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", "2e10")
     assert Scenario.from_dict(_big_room(small_dict, 50)).room.shape == (2000, 2000)  # allowed by the user
@@ -253,3 +255,92 @@ def test_the_memory_cap_is_documented_and_overridable(small_dict, monkeypatch):
     monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", "lots")
     with pytest.raises(ValueError, match=r"NOMA_RADIOMAP_MAX_MEMORY_BYTES: expected a positive number of bytes, got 'lots'"):
         RadioMap(small)
+
+
+def test_start_regions_too_big_for_memory_are_refused_at_load(small_dict):
+    """1 000 robots each starting anywhere in a 200 x 200 m room at 0.5 m: the env's mission sampler would keep
+    160 000 start cells per robot (> 2.4 GB); the estimate counts them and the file is refused at load."""
+    import tracemalloc
+
+    data = copy.deepcopy(small_dict)
+    data["room"].update(width=200.0, depth=200.0, resolution=0.5)
+    data["robots"] = [{"start": [0.0, 0.0, 200.0, 200.0], "destinations": [[100.0, 100.0]]} for _ in range(1000)]
+    assert len(yaml.safe_dump(data)) < 100_000
+    tracemalloc.start()
+    start = time.process_time()
+    try:
+        with pytest.raises(
+            ValueError,
+            match=r"robots: 1,000 robots' start regions x destinations \(160,000,000 start cells x destinations in all"
+            r".* need about 2\.\d+ GiB .* 2\.\d+ GiB of start-cell tables\), more than the cap of 1\.00 GiB",
+        ):
+            Scenario.from_dict(data)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert time.process_time() - start < 1.0 and peak < 50 * 2**20
+
+
+def test_the_builtin_scenarios_stay_far_under_the_memory_cap():
+    from noma_radiomap import list_scenarios, radiomap
+
+    for name in list_scenarios():
+        scenario = load_scenario(name)
+        assert radiomap.estimated_memory(scenario)["total"] < 2**30 // 20, name
+        assert radiomap.missions_memory(64, scenario, "geodesic")["total"] < 2**30 // 20, name
+
+
+def test_geodesic_distance_tables_count_against_the_memory_cap(monkeypatch):
+    """inducing='geodesic' gives every mission a float64 table per robot per cell at its first reset: counted when
+    the env is built, before anything is allocated."""
+    from noma_radiomap import radiomap
+    from noma_radiomap.vector import NomaRadioMapVecEnv
+
+    start = time.process_time()
+    with pytest.raises(
+        ValueError,
+        match=r"num_envs, inducing: 60,000 missions need about 6\.04 GiB with inducing='geodesic' \(5\.90 GiB of "
+        r"distance tables: 2 robots x 6,600 cells x 8 bytes per mission, .*\), more than the cap of 1\.00 GiB",
+    ):
+        NomaRadioMapVecEnv(60_000, scenario="mall", inducing="geodesic")
+    assert time.process_time() - start < 2.0
+    NomaRadioMapVecEnv(60_000, scenario="mall")  # Euclidean: 60 000 missions are within the cap
+    monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", str(5 * 2**20))
+    NomaRadioMapVecEnv(1000, scenario="small")  # 2.3 MiB
+    with pytest.raises(ValueError, match=r"num_envs, inducing: 1,000 missions need about 8\.\d MiB"):
+        NomaRadioMapVecEnv(1000, scenario="small", inducing="geodesic")
+    # A single env's tables count too: a table per robot, and the radio map's cached distance fields (4 destinations)
+    need = radiomap.missions_memory(1, load_scenario("small"), "geodesic")
+    assert need["distances"] == 8 * 384 * (2 + 4) and need["total"] == need["missions"] + need["distances"]
+
+
+@pytest.mark.parametrize(
+    ("field", "name"),
+    [("name", "a\x00b"), ("name", "\x1b[31mred"), ("obstacles", "wall\x1b[2J"), ("interferers", "out\u202edoor")],
+)
+def test_names_with_control_characters_are_refused(small_dict, field, name):
+    data = copy.deepcopy(small_dict)
+    if field == "name":
+        data["name"], path = name, "name"
+    else:
+        data[field][0]["name"], path = name, f"{field}[0].name"
+    with pytest.raises(ValueError, match=rf"^{re.escape(path)}: .* holds a control character") as error:
+        Scenario.from_dict(data)
+    assert "\x1b" not in str(error.value) and "\x00" not in str(error.value)  # quoted, not echoed raw
+    data = copy.deepcopy(small_dict)
+    data["name"] = "Café 3 (é, ü, 漢字) - ok"  # printable Unicode is fine
+    assert Scenario.from_dict(data).name == data["name"]
+
+
+def test_an_arrival_radius_that_covers_every_start_is_refused_at_load(small_dict):
+    """The env's mission sampler refuses a destination every start cell is within arrival_radius of; the load
+    gives the same message, before anything is built."""
+    data = copy.deepcopy(small_dict)
+    data["robot"]["arrival_radius"] = 1000.0  # within its range, larger than the room's diagonal
+    message = r"robots\[0\]\.start: every free cell of \[0\.5, 0\.5, 2\.5, 2\.5\] is within arrival_radius of destination"
+    with pytest.raises(ValueError, match=message):
+        Scenario.from_dict(data)
+    data["robot"]["arrival_radius"] = 1.1
+    data["robots"][0]["destinations"].append([1.5, 1.5])  # the start region's centre: 1.1 m reaches all its cells
+    with pytest.raises(ValueError, match=r"robots\[0\]\.start: .* within arrival_radius of destination \[1\.5, 1\.5\]"):
+        Scenario.from_dict(data)

@@ -39,11 +39,37 @@ TINY = dict(policy_kwargs=dict(net_arch=[8]), learning_starts=10, batch_size=8)
         (dict(train_freq=(2, "epoch")), "the unit of train_freq must be 'step' or 'episode', got 'epoch'"),
         (dict(gradient_steps=-2), "gradient_steps must be an integer >= 0, or -1, got -2"),
         (dict(gradient_steps=1.5), "gradient_steps must be an integer >= 0, or -1, got 1.5"),
+        (dict(n_steps=10**9), "n_steps must be at most buffer_size (1000000), got 1000000000"),
+        (dict(policy_kwargs="x"), "policy_kwargs must be a dict, e.g. dict(net_arch=[64, 64]), got 'x'"),
+        (dict(reinitialize_at_transfer="no"), "reinitialize_at_transfer must be True or False, got 'no'"),
+        (dict(lean=None), "lean must be True or False, got None"),
     ],
 )
 def test_dtdpg_constructor_ranges(kwargs, message):
     with pytest.raises(ValueError, match=re.escape(f"DTDPG: {message}")):
         DTDPG("MlpPolicy", "Pendulum-v1", **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(log_interval=0), "log_interval must be a positive integer or None, got 0"),  # was a ZeroDivisionError
+        (dict(callback=5), "callback must be a BaseCallback, a function or a list of these, got int 5"),
+        (dict(callback=[lambda *_: True, "x"]), "got str 'x'"),
+    ],
+)
+def test_learn_refuses_arguments_that_would_fail_mid_training(kwargs, message):
+    model = DTDPG("MlpPolicy", "Pendulum-v1", **TINY)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        model.learn(20, **kwargs)
+    assert model.num_timesteps == 0
+
+
+def test_load_checks_the_settings_it_is_given(tmp_path):
+    DTDPG("MlpPolicy", "Pendulum-v1", **TINY).save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=re.escape("DTDPG.load: gamma must be a number in [0, 1], got 5.0")):
+        DTDPG.load(tmp_path / "model.zip", gamma=5.0)
+    assert DTDPG.load(tmp_path / "model.zip", gamma=0.5).gamma == 0.5
 
 
 @pytest.mark.parametrize("total_timesteps", [-5, 0, 2.5, "100", True])
@@ -54,13 +80,14 @@ def test_learn_needs_a_positive_integer_budget(total_timesteps):
     assert model.num_timesteps == 0
 
 
-def test_a_curriculum_save_path_that_is_a_file_is_refused_at_construction(tmp_path):
+@pytest.mark.parametrize("setting", ["curriculum_save_path", "tensorboard_log"])
+def test_a_folder_setting_that_is_a_file_is_refused_at_construction(tmp_path, setting):
     path = tmp_path / "taken"
     path.write_text("another run's file")
-    with pytest.raises(ValueError, match="curriculum_save_path must be a folder, got the file"):
-        DTDPG("MlpPolicy", "Pendulum-v1", curriculum_save_path=str(path), **TINY)
+    with pytest.raises(ValueError, match=f"{setting} must be a folder, got the file"):
+        DTDPG("MlpPolicy", "Pendulum-v1", **{setting: str(path)}, **TINY)
     assert path.read_text() == "another run's file"
-    DTDPG("MlpPolicy", "Pendulum-v1", curriculum_save_path=str(tmp_path / "new"), **TINY)  # a folder to be made
+    DTDPG("MlpPolicy", "Pendulum-v1", **{setting: str(tmp_path / "new")}, **TINY)  # a folder to be made
 
 
 @pytest.mark.parametrize(

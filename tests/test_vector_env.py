@@ -1,6 +1,8 @@
 """The batched mission env (NomaRadioMapVecEnv, MissionVecEnv): same transitions as N single envs, the SB3 and
 Gymnasium vector-env contracts, and DT-DPG / the baselines training from it."""
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -285,3 +287,150 @@ def test_study_workers_share_the_runs(tmp_path):
     assert len(first) == 2 and sorted(first + second) == sorted(spec.run_id for spec in specs)
     assert sorted(ran) == sorted(spec.run_id for spec in specs)
     assert run_study_worker(specs, tmp_path, storage, "job", run=fake_run) == []
+
+
+def _mission_state(core):
+    """Everything a reset changes: the state arrays, the observations and each mission's generator state."""
+    arrays = (core.positions, core.destinations, core.arrived, core.step_counts, core.arrival_steps, core.outage_steps)
+    return [a.copy() for a in (*arrays, core.gain_db, core.observations())], [r.bit_generator.state for r in core.np_randoms]
+
+
+def _assert_same_state(before, after):
+    for a, b in zip(before[0], after[0], strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert before[1] == after[1]
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        ({"reset_mask": [True] * 5}, r"options\['reset_mask'\]: expected 3 booleans \(one per mission\), got shape \(5,\)"),
+        ({"reset_mask": [1, 0, 1]}, r"options\['reset_mask'\]: expected booleans \(dtype bool\), got dtype int"),
+        ({"reset_mask": [[True, False]]}, r"options\['reset_mask'\]: expected 3 booleans .* got shape \(1, 2\)"),
+        ({"starts": [[1.0, 1.0], [100.0, 100.0]]}, r"options\['starts'\]\[1\]: \[100\.0, 100\.0\] is outside the room"),
+        (
+            {"starts": [[1.0, 1.0], [1.0, 6.0]], "destinations": [[1.2, 1.2], [9.0, 4.0]]},
+            r"options: start \[1\.0, 1\.0\] of robot 0 is already within arrival_radius",
+        ),
+        ({"speed": 2}, r"options: unknown keys \['speed'\]"),
+    ],
+)
+def test_a_refused_vector_reset_leaves_every_mission_as_it_was(options, match):
+    rng = np.random.default_rng(1)
+    envs = [gym.make_vec("NomaRadioMap-v0", num_envs=3, scenario="small") for _ in range(2)]
+    for env in envs:
+        env.reset(seed=0)
+    for _ in range(4):
+        actions = rng.uniform(-1, 1, (3, 6))
+        for env in envs:
+            env.step(actions)
+    env, twin = envs
+    before = _mission_state(env.core)
+    with pytest.raises(ValueError, match=match):
+        env.reset(seed=5, options=options)
+    _assert_same_state(before, _mission_state(env.core))
+    # The refused reset left no trace: the env goes on as its twin that never saw it
+    for _ in range(3):
+        actions = rng.uniform(-1, 1, (3, 6))
+        for a, b in zip(env.step(actions), twin.step(actions), strict=True):
+            np.testing.assert_equal(a, b)
+    np.testing.assert_array_equal(env.core.step_counts, [7, 7, 7])
+    np.testing.assert_array_equal(env.reset()[0], twin.reset()[0])
+
+
+def test_a_refused_sb3_reset_leaves_the_missions_drawn_before_it_as_they_were():
+    """Per-mission options: mission 0 is drawn (from its generator) before mission 1's option is refused."""
+    envs = [MissionVecEnv(3, scenario="small") for _ in range(2)]
+    rng = np.random.default_rng(2)
+    for env in envs:
+        env.seed(0)
+        env.reset()
+    for _ in range(4):
+        actions = rng.uniform(-1, 1, (3, 6)).astype(np.float32)
+        for env in envs:
+            env.step(actions)
+    env, twin = envs
+    before = _mission_state(env.vec_env.core)
+    env.set_options([{}, {"starts": [[1, 1], [100, 100]]}, {}])
+    with pytest.raises(ValueError, match=r"options\['starts'\]\[1\]: \[100\.0, 100\.0\] is outside the room"):
+        env.reset()
+    _assert_same_state(before, _mission_state(env.vec_env.core))
+    env.set_options([{}, {}])
+    with pytest.raises(ValueError, match=r"options: expected one dict per reset mission \(3\), got a list of 2"):
+        env.reset()
+    env.set_options(["starts", {}, {}])
+    with pytest.raises(ValueError, match=r"options\[0\]: expected a dict of reset options \(or None\), got str"):
+        env.reset()
+    _assert_same_state(before, _mission_state(env.vec_env.core))
+    env.set_options(None)
+    actions = rng.uniform(-1, 1, (3, 6)).astype(np.float32)
+    for a, b in zip(env.step(actions), twin.step(actions), strict=True):
+        np.testing.assert_equal(a, b)
+    np.testing.assert_array_equal(env.reset(), twin.reset())
+
+
+@pytest.mark.parametrize(
+    ("name", "instead"),
+    [
+        ("trajectory", r"the vector env keeps no trajectories: record get_attr\('positions'\)"),
+        ("render", r"the vector env does not render: render a single env"),
+        ("reset", r"reset the vector env"),
+        ("core", r"the vector env.s engine is vec_env\.core"),
+        ("step_counts", r"a mission has .*positions, .*step_count"),
+        ("np_randoms", r"a mission has .*np_random,"),
+    ],
+)
+def test_a_mission_of_the_vector_envs_answers_its_own_values_or_names_the_attribute(name, instead):
+    gym_env, sb3_env = NomaRadioMapVecEnv(3, scenario="small"), MissionVecEnv(3, scenario="small")
+    gym_env.reset(seed=0)
+    sb3_env.reset()
+    match = rf"'{name}': not an attribute of a mission of the vector env; {instead}"
+    for get in (gym_env.get_attr, gym_env.call, sb3_env.get_attr, sb3_env.env_method):
+        with pytest.raises(AttributeError, match=match):
+            get(name)
+    assert not sb3_env.has_attr(name)
+    # The values a mission has are its own, or those every mission shares
+    core = gym_env.core
+    for i, positions in enumerate(gym_env.get_attr("positions")):
+        np.testing.assert_array_equal(positions, core.positions[i])
+    assert gym_env.get_attr("np_random") == tuple(core.np_randoms)
+    assert gym_env.get_attr("step_count") == (0, 0, 0)
+    assert gym_env.get_attr("render_mode") == (None, None, None) and sb3_env.render_mode is None
+    assert gym_env.get_attr("REWARD_PHASES")[2] == NomaRadioMapVecEnv.REWARD_PHASES
+    assert gym_env.get_attr("scenario")[1] is core.scenario and gym_env.get_attr("max_episode_steps") == (60, 60, 60)
+    assert sb3_env.has_attr("reward_weights") and not sb3_env.has_attr("default_curriculum")
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "match"),
+    [
+        (lambda env: env.reset(options=[{}]), ValueError, r"options: expected a dict of reset options \(or None\), got list"),
+        (lambda env: env.reset(options="starts"), ValueError, r"options: expected a dict .* got str"),
+        (lambda env: env.reset(seed=1.5), ValueError, r"seed: expected an integer >= 0, a list of 3 .* got 1\.5"),
+        (lambda env: env.reset(seed=-1), ValueError, r"seed: expected an integer >= 0, .* got -1"),
+        (lambda env: env.reset(seed="7"), ValueError, r"seed: expected an integer >= 0, .* got '7'"),
+        (lambda env: env.reset(seed=[0, 1]), ValueError, r"seed: expected 3 seeds \(one per mission\), got 2"),
+        (lambda env: env.reset(seed=[0, 1.5, None]), ValueError, r"seed\[1\]: expected an integer >= 0 or None, got 1\.5"),
+        (lambda env: env.set_reward_phase("mqi", 10), IndexError, r"indices: mission indices must be .* \[0, 3\), got 10"),
+        (lambda env: env.set_reward_phase("mqi", -1), IndexError, r"indices: mission indices must be .* \[0, 3\), got -1"),
+        (lambda env: env.set_reward_phase("mqi", [0, 3]), IndexError, r"indices: .* got 3"),
+        (lambda env: env.set_reward_phase("mqi", 1.0), IndexError, r"indices: expected None, a mission index .* got 1\.0"),
+    ],
+)
+def test_bad_reset_and_phase_arguments_of_the_vector_env_are_named(call, error, match):
+    env = NomaRadioMapVecEnv(3, scenario="small")
+    env.reset(seed=0)
+    before = _mission_state(env.core)
+    with pytest.raises(error, match=match):
+        call(env)
+    _assert_same_state(before, _mission_state(env.core))
+    assert env.reward_phases == ["destination"] * 3
+
+
+@pytest.mark.parametrize("value", [2.7, "5", True, 0, -3])
+def test_max_episode_steps_of_the_vector_env_must_be_an_integer(value):
+    with pytest.raises(
+        ValueError, match=rf"max_episode_steps must be an integer >= 1 \(or None\), got {re.escape(repr(value))}"
+    ):
+        NomaRadioMapVecEnv(2, scenario="small", max_episode_steps=value)
+    assert NomaRadioMapVecEnv(2, scenario="small", max_episode_steps=np.int64(5)).max_episode_steps == 5

@@ -25,6 +25,8 @@ def zoo_train(tmp_path, *args):
         ("  learnin_rate: 0.001\n", "unknown hyperparameter 'learnin_rate' for DTDPG (env Pendulum-v1 in "),
         ('  policy_kwargs: "dict(net_arch=[100000, 100000])"\n', "more than the 20,000,000 allowed"),
         ("  learning_starts: 5000\n", "n_timesteps=1000 cannot train: the first gradient step comes after"),
+        ("  gamma: 5\n", "or -params): gamma must be a number in [0, 1], got 5"),
+        ("  seed: 3\n", "or -params): set it with --seed, not as a hyperparameter"),
     ],
 )
 def test_a_bad_hyperparameter_file_is_one_error_line(tmp_path, entry, message):
@@ -39,6 +41,16 @@ def test_a_bad_hyperparameter_file_is_one_error_line(tmp_path, entry, message):
     if "learnin_rate" in entry:
         assert "did you mean 'learning_rate'" in errors[0]
     assert not (tmp_path / "logs").exists()  # nothing created
+
+
+def test_bad_env_kwargs_are_one_error_line_before_the_log_folder(tmp_path):
+    config = tmp_path / "ok.yml"
+    config.write_text("Pendulum-v1:\n  n_timesteps: 1000\n  policy: MlpPolicy\n  learning_starts: 100\n")
+    done = zoo_train(tmp_path, "--conf-file", str(config), "--env-kwargs", "foo:1")
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    errors = [line for line in done.stderr.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and "env_kwargs {'foo': 1}" in errors[0] and "'foo'" in errors[0]
+    assert not (tmp_path / "logs").exists()
 
 
 @pytest.mark.parametrize(

@@ -9,6 +9,8 @@ seeded ``s`` makes the transitions of a single env seeded ``s``.
 """
 
 import os
+import reprlib
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -140,6 +142,33 @@ def _same(value: Any) -> Any:
     return value
 
 
+def check_max_episode_steps(value: Any) -> None:
+    """:raises ValueError: ``value`` is neither None nor an integer >= 1, naming ``max_episode_steps`` and the value"""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise ValueError(f"max_episode_steps must be an integer >= 1 (or None), got {reprlib.repr(value)}")
+
+
+def _row_options(options: Any, n_rows: int) -> list[dict | None]:
+    """
+    The reset options of each of ``n_rows`` reset missions.
+
+    :param options: None, one mapping for every row or a list of one mapping (or None) per row
+    :raises ValueError: naming ``options`` and what it is
+    """
+    if options is None or isinstance(options, Mapping):
+        return [options] * n_rows  # type: ignore[list-item]
+    if not isinstance(options, list):
+        raise ValueError(f"options: expected a dict of reset options (or None), got {type(options).__name__}")
+    if len(options) != n_rows:
+        raise ValueError(f"options: expected one dict per reset mission ({n_rows}), got a list of {len(options)}")
+    for k, item in enumerate(options):
+        if item is not None and not isinstance(item, Mapping):
+            raise ValueError(f"options[{k}]: expected a dict of reset options (or None), got {type(item).__name__}")
+    return options
+
+
 def load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
     """A scenario from a built-in name, a YAML path or a :class:`Scenario`."""
     if isinstance(scenario, Scenario):
@@ -198,7 +227,10 @@ class MissionCore:
         if observation is None:
             observation = default_observation(task)
         check_observation(observation)
+        check_max_episode_steps(max_episode_steps)
+        n = int(num_missions)
         sc = load(scenario)
+        check_missions_memory(n, sc, inducing)  # before the map, the sampler and the missions' arrays are built
         # The map does not depend on the missions: the scenario as loaded hits the map cache
         self.radio_map = RadioMap.for_scenario(sc)
         sc = task_scenario(sc, task)
@@ -208,8 +240,6 @@ class MissionCore:
         self.n_robots = sc.n_robots
         self.max_steps = sc.mission.max_steps
         limit = self.max_steps if max_episode_steps is None else int(max_episode_steps)
-        if limit < 1:
-            raise ValueError(f"max_episode_steps must be >= 1, got {max_episode_steps!r}")
         self.max_episode_steps = min(limit, self.max_steps)
         self.motion = GridMotion(
             self.radio_map.blocked,
@@ -238,8 +268,7 @@ class MissionCore:
         #: Draws the starts and destinations of a reset (:class:`noma_radiomap.sampling.MissionSampler`)
         self.sampler = MissionSampler(sc, self.radio_map, self.motion, fixed_destinations=task == "paper")
 
-        n, u = int(num_missions), self.n_robots
-        check_missions_memory(n)
+        u = self.n_robots
         self.num_missions = n
         self.np_randoms: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(n)]
         self.reward_phases = [reward_phase] * n
@@ -282,33 +311,60 @@ class MissionCore:
         rngs: list[np.random.Generator] | None = None,
     ) -> None:
         """
-        Reset some missions: draw (or take from ``options``) their starts and destinations.
+        Reset some missions: draw (or take from ``options``) their starts and destinations. Every mission is drawn
+        before any changes: a refused option (a ``ValueError`` naming it) leaves every mission, and its generator,
+        as it was.
 
         :param rows: the missions to reset
         :param seeds: a seed per row (None entries keep the generator going)
         :param options: the reset options (``starts``, ``destinations``), for every row or one per row
         :param rngs: a generator per row to use from now on (the single env passes its ``np_random``)
         """
+        row_options = _row_options(options, len(rows))
+        generators = [self._generator(i, k, seeds, rngs) for k, i in enumerate(rows)]
+        starts, destinations = self._draw(row_options, generators)
+        geodesic = self.inducing == "geodesic"
+        if geodesic and self._distance_maps.shape[-1] == 0:  # counted by radiomap.check_missions_memory
+            cells = self.scenario.room.nx * self.scenario.room.ny
+            self._distance_maps = np.zeros((self.num_missions, self.n_robots, cells))
         for k, i in enumerate(rows):
-            if rngs is not None:
-                self.np_randoms[i] = rngs[k]
-            elif seeds is not None and seeds[k] is not None:
-                self.np_randoms[i] = seeding.np_random(seeds[k])[0]
-            row_options = options[k] if isinstance(options, list) else options
-            self.positions[i], self.destinations[i] = self.sampler.draw(row_options, self.np_randoms[i])
+            self.np_randoms[i] = generators[k]
+            self.positions[i], self.destinations[i] = starts[k], destinations[k]
         self.arrived[rows] = False
         self.step_counts[rows] = 0
         self.arrival_steps[rows] = self.max_steps
         self.outage_steps[rows] = 0
-        if self.inducing == "geodesic":
-            if self._distance_maps.shape[-1] == 0:
-                cells = self.scenario.room.nx * self.scenario.room.ny
-                self._distance_maps = np.zeros((self.num_missions, self.n_robots, cells))
+        if geodesic:
             for i in rows:
                 self._distance_maps[i] = np.stack([self.radio_map.distance_field(d).ravel() for d in self.destinations[i]])
         self._reset_channel(rows)
         self._was_reset[rows] = True
         self._all_reset = bool(self._was_reset.all())
+
+    def _generator(
+        self, i: int, k: int, seeds: list[int | None] | None, rngs: list[np.random.Generator] | None
+    ) -> np.random.Generator:
+        """The generator of mission ``i`` (the ``k``-th reset row) from this reset on: given, seeded or its own."""
+        if rngs is not None:
+            return rngs[k]
+        if seeds is not None and seeds[k] is not None:
+            return seeding.np_random(seeds[k])[0]
+        return self.np_randoms[i]
+
+    def _draw(self, options: list[dict | None], generators: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:
+        """The starts and destinations (rows, U, 2) of a reset, drawn with ``generators``; when an option is refused,
+        the generators are put back to their states before the draws, and the ``ValueError`` raised."""
+        states = [rng.bit_generator.state for rng in generators]
+        starts = np.empty((len(generators), self.n_robots, 2))
+        destinations = np.empty((len(generators), self.n_robots, 2))
+        try:
+            for k, rng in enumerate(generators):
+                starts[k], destinations[k] = self.sampler.draw(options[k], rng)
+        except BaseException:
+            for rng, state in zip(generators, states, strict=True):
+                rng.bit_generator.state = state
+            raise
+        return starts, destinations
 
     def check_reset(self, rows: np.ndarray | slice = slice(None)) -> None:
         """:raises ResetNeeded: a mission of ``rows`` has not been reset yet"""

@@ -1,6 +1,7 @@
 """The NOMA indoor radio-map environment (the paper's Sections II-IV; docs/MODEL.md, docs/ARCHITECTURE.md)."""
 
 import os
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -223,9 +224,16 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     # --- Gymnasium API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"options: expected a dict of reset options (or None), got {type(options).__name__}")
+        generator = self._np_random, self._np_random_seed
         super().reset(seed=seed)
         core = self.core
-        core.reset(np.zeros(1, dtype=np.int64), options=options, rngs=[self.np_random])
+        try:
+            core.reset(np.zeros(1, dtype=np.int64), options=options, rngs=[self.np_random])
+        except ValueError:  # a refused option: the env, its generator included, is as it was
+            self._np_random, self._np_random_seed = generator
+            raise
         self._trajectory = [core.positions[0].copy()]
         if self.render_mode == "human":
             self.render()

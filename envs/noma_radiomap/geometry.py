@@ -304,15 +304,36 @@ def region_cells(region: tuple[float, float, float, float], resolution: float, s
     :return: int (k, 2) cell indices ``[ix, iy]`` (k >= 1), blocked or not
     """
     x0, y0, x1, y1 = region
-    ix0, iy0 = int(np.ceil(x0 / resolution - 0.5 - 1e-9)), int(np.ceil(y0 / resolution - 0.5 - 1e-9))
-    ix1, iy1 = int(np.floor(x1 / resolution - 0.5 + 1e-9)), int(np.floor(y1 / resolution - 0.5 + 1e-9))
-    ix0, iy0 = max(ix0, 0), max(iy0, 0)
-    ix1, iy1 = min(ix1, shape[0] - 1), min(iy1, shape[1] - 1)
+    ix0, iy0, ix1, iy1 = _region_bounds(region, resolution, shape)
     if ix1 < ix0 or iy1 < iy0:
         ix, iy = point_cell(np.array([(x0 + x1) / 2.0, (y0 + y1) / 2.0]), resolution, shape)
         return np.array([[int(ix), int(iy)]], dtype=np.int64)
     gx, gy = np.meshgrid(np.arange(ix0, ix1 + 1), np.arange(iy0, iy1 + 1), indexing="ij")
     return np.stack([gx.ravel(), gy.ravel()], axis=1).astype(np.int64)
+
+
+def region_size(region: tuple[float, float, float, float], resolution: float, shape: tuple[int, int]) -> int:
+    """
+    The number of cells of :func:`region_cells`, without building them (for memory estimates).
+
+    :param region: ``(x0, y0, x1, y1)`` in metres
+    :param resolution: cell size (m)
+    :param shape: grid shape ``(nx, ny)``
+    :return: k >= 1
+    """
+    ix0, iy0, ix1, iy1 = _region_bounds(region, resolution, shape)
+    return 1 if ix1 < ix0 or iy1 < iy0 else (ix1 - ix0 + 1) * (iy1 - iy0 + 1)
+
+
+def _region_bounds(
+    region: tuple[float, float, float, float], resolution: float, shape: tuple[int, int]
+) -> tuple[int, int, int, int]:
+    """The first and last cell indices ``(ix0, iy0, ix1, iy1)`` whose centres lie in ``region`` (empty: ix1 < ix0 or
+    iy1 < iy0)."""
+    x0, y0, x1, y1 = region
+    ix0, iy0 = int(np.ceil(x0 / resolution - 0.5 - 1e-9)), int(np.ceil(y0 / resolution - 0.5 - 1e-9))
+    ix1, iy1 = int(np.floor(x1 / resolution - 0.5 + 1e-9)), int(np.floor(y1 / resolution - 0.5 + 1e-9))
+    return max(ix0, 0), max(iy0, 0), min(ix1, shape[0] - 1), min(iy1, shape[1] - 1)
 
 
 # --------------------------------------------------------------------------------------------------

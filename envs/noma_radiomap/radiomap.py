@@ -47,6 +47,13 @@ _MEMORY_VARIABLE = "NOMA_RADIOMAP_MAX_MEMORY_BYTES"
 _PER_CELL, _PER_CELL_TRANSMITTER, _PER_CELL_TABLE = 10, 6, 2
 #: Memory of one mission of a vector env, in bytes (measured: its own random generator, about 2 KB, and its arrays)
 _PER_MISSION = 2_400
+#: Bytes per start cell per destination of a robot in the env's mission sampler
+#: (:class:`noma_radiomap.sampling.MissionSampler`: the float64 centres of its free start cells far enough from each
+#: destination), and per start cell of the largest start region while the sampler is built (the cells, their centres
+#: and distances)
+_PER_START_CELL, _PER_START_CELL_BUILD = 16, 48
+#: Distance fields (one per destination cell, float64 per cell) that the radio map caches for ``inducing="geodesic"``
+_CACHED_DISTANCE_FIELDS = 64
 
 
 def estimated_memory(scenario: Scenario) -> dict[str, int]:
@@ -55,25 +62,35 @@ def estimated_memory(scenario: Scenario) -> dict[str, int]:
     allocated): ``cells x transmitters x 8 bytes x`` the number of arrays of each kind, plus the buffers of the
     chunked occlusion test (:data:`noma_radiomap.geometry.CHUNK_PAIRS`).
 
+    The env's mission sampler counts too: per robot, the centres of the cells of its start region, once per
+    destination (:class:`noma_radiomap.sampling.MissionSampler`), counted from the regions' sizes
+    (:func:`~noma_radiomap.geometry.region_size`, blocked cells included: an upper bound).
+
     :param scenario: the scenario
-    :return: ``cells``, ``transmitters``, ``boxes`` and the estimate in bytes: ``maps``, ``tables``,
-        ``occlusion`` and their ``total``
+    :return: ``cells``, ``transmitters``, ``boxes``, ``start_cells`` (start cells x destinations, summed over the
+        robots) and the estimate in bytes: ``maps``, ``tables``, ``occlusion``, ``starts`` and their ``total``
     """
-    cells = scenario.room.nx * scenario.room.ny
+    room = scenario.room
+    cells = room.nx * room.ny
     transmitters = 1 + len(scenario.interferers)
     boxes = sum(len(obstacle.boxes) for obstacle in scenario.obstacles)
     maps = 8 * cells * (_PER_CELL + _PER_CELL_TRANSMITTER * transmitters + (transmitters - 1))
     tables = 8 * cells * _PER_CELL_TABLE * transmitters
     rows = min(cells, max(1, geometry.CHUNK_PAIRS // max(boxes, 1)))
     occlusion = 8 * 8 * rows * boxes  # ~8 float64 arrays per segment-box pair of a chunk
-    total = maps + tables + occlusion
+    regions = [geometry.region_size(robot.start, room.resolution, room.shape) for robot in scenario.robots]
+    start_cells = sum(k * len(robot.destinations) for k, robot in zip(regions, scenario.robots, strict=True))
+    starts = _PER_START_CELL * start_cells + _PER_START_CELL_BUILD * max(regions, default=0)
+    total = maps + tables + occlusion + starts
     return {
         "cells": cells,
         "transmitters": transmitters,
         "boxes": boxes,
+        "start_cells": start_cells,
         "maps": maps,
         "tables": tables,
         "occlusion": occlusion,
+        "starts": starts,
         "total": total,
     }
 
@@ -98,29 +115,73 @@ def check_memory(scenario: Scenario) -> None:
     :raises ValueError: its :func:`estimated_memory` exceeds :func:`memory_cap`, naming the numbers
     """
     estimate, cap = estimated_memory(scenario), memory_cap()
-    if estimate["total"] > cap:
+    if estimate["total"] <= cap:
+        return
+    parts = (
+        f"({_size(estimate['maps'])} of maps, {_size(estimate['tables'])} of gain tables, "
+        f"{_size(estimate['occlusion'])} of occlusion buffers, {_size(estimate['starts'])} of start-cell tables)"
+    )
+    raise_cap = f"or raise the cap ({_MEMORY_VARIABLE} or noma_radiomap.radiomap.MAX_MEMORY_BYTES)"
+    if 2 * estimate["starts"] > estimate["total"]:  # the robots' start regions, not the grid, take most of it
         raise ValueError(
-            f"room.resolution, interferers: {estimate['cells']:,} cells x {estimate['transmitters']} transmitters "
-            f"(the AP and {estimate['transmitters'] - 1} interferers) need about {_size(estimate['total'])} for the "
-            f"radio map and the env's tables ({_size(estimate['maps'])} of maps, {_size(estimate['tables'])} of gain "
-            f"tables, {_size(estimate['occlusion'])} of occlusion buffers), more than the cap of {_size(cap)}; use a "
-            f"coarser room.resolution or fewer interferers, or raise the cap ({_MEMORY_VARIABLE} or "
-            "noma_radiomap.radiomap.MAX_MEMORY_BYTES)"
+            f"robots: {scenario.n_robots:,} robots' start regions x destinations ({estimate['start_cells']:,} start "
+            f"cells x destinations in all, on the {scenario.room.resolution!r} m grid) need about "
+            f"{_size(estimate['total'])} for the radio map and the env's tables {parts}, more than the cap of "
+            f"{_size(cap)}; use smaller robots[k].start regions, fewer destinations or a coarser room.resolution, "
+            f"{raise_cap}"
         )
+    raise ValueError(
+        f"room.resolution, interferers: {estimate['cells']:,} cells x {estimate['transmitters']} transmitters "
+        f"(the AP and {estimate['transmitters'] - 1} interferers) need about {_size(estimate['total'])} for the "
+        f"radio map and the env's tables {parts}, more than the cap of {_size(cap)}; use a coarser room.resolution "
+        f"or fewer interferers, {raise_cap}"
+    )
 
 
-def check_missions_memory(n_missions: int) -> None:
+def missions_memory(n_missions: int, scenario: Scenario | None = None, inducing: str = "euclidean") -> dict[str, int]:
     """
-    :param n_missions: the missions of a vector env (``num_envs``)
-    :raises ValueError: they need more than :func:`memory_cap`, naming the numbers
+    The memory the missions of an env take, estimated from their number and the scenario's size (nothing is
+    allocated): each its own random generator and arrays and, with ``inducing="geodesic"``, a distance table per
+    robot (float64 per cell, allocated at the first reset) and the radio map's cached distance fields (one per
+    destination cell, at most :data:`_CACHED_DISTANCE_FIELDS`).
+
+    :param n_missions: the missions (``num_envs``; 1 for a single env)
+    :param scenario: the scenario (None: the per-mission part only)
+    :param inducing: the env's ``inducing``
+    :return: ``missions`` (generators and arrays), ``distances`` (the geodesic tables) and their ``total``, in bytes
     """
-    need, cap = n_missions * _PER_MISSION, memory_cap()
-    if need > cap:
+    missions, distances = n_missions * _PER_MISSION, 0
+    if scenario is not None and inducing == "geodesic":
+        cells = scenario.room.nx * scenario.room.ny
+        fields = min(_CACHED_DISTANCE_FIELDS, sum(len(robot.destinations) for robot in scenario.robots))
+        distances = 8 * cells * (n_missions * scenario.n_robots + fields)
+    return {"missions": missions, "distances": distances, "total": missions + distances}
+
+
+def check_missions_memory(n_missions: int, scenario: Scenario | None = None, inducing: str = "euclidean") -> None:
+    """
+    :param n_missions: the missions of a vector env (``num_envs``; 1 for a single env)
+    :param scenario: the scenario (None: the per-mission part only)
+    :param inducing: the env's ``inducing`` (``"geodesic"``: per-mission distance tables)
+    :raises ValueError: they need more than :func:`memory_cap` (:func:`missions_memory`), naming the numbers
+    """
+    need, cap = missions_memory(n_missions, scenario, inducing), memory_cap()
+    if need["total"] <= cap:
+        return
+    raise_cap = f"or raise the cap ({_MEMORY_VARIABLE} or noma_radiomap.radiomap.MAX_MEMORY_BYTES)"
+    if not need["distances"]:
         raise ValueError(
-            f"num_envs: {n_missions:,} missions need about {_size(need)} (each its own random generator and arrays), "
-            f"more than the cap of {_size(cap)}; use fewer missions, or raise the cap ({_MEMORY_VARIABLE} or "
-            "noma_radiomap.radiomap.MAX_MEMORY_BYTES)"
+            f"num_envs: {n_missions:,} missions need about {_size(need['total'])} (each its own random generator and "
+            f"arrays), more than the cap of {_size(cap)}; use fewer missions, {raise_cap}"
         )
+    assert scenario is not None
+    cells = scenario.room.nx * scenario.room.ny
+    raise ValueError(
+        f"num_envs, inducing: {n_missions:,} missions need about {_size(need['total'])} with inducing='geodesic' "
+        f"({_size(need['distances'])} of distance tables: {scenario.n_robots:,} robots x {cells:,} cells x 8 bytes "
+        f"per mission, {_size(need['missions'])} of random generators and arrays), more than the cap of "
+        f"{_size(cap)}; use fewer missions, inducing='euclidean' or a coarser room.resolution, {raise_cap}"
+    )
 
 
 def _size(n_bytes: int) -> str:

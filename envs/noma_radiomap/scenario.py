@@ -28,6 +28,7 @@ import math
 import os
 import re
 import reprlib
+import unicodedata
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -63,6 +64,9 @@ MAX_FILE_BYTES = 4_000_000
 MAX_NAME_CHARS = 100
 #: Longest quoted value in an error message.
 MAX_MESSAGE_CHARS = 200
+#: Unicode categories of the characters a name may not hold: control (NUL, ESC, newline, ...), format (bidi
+#: overrides, zero-width), surrogates and line or paragraph separators; names end up in terminals and file names.
+_CONTROL_CATEGORIES = frozenset({"Cc", "Cf", "Cs", "Zl", "Zp"})
 #: Physical range ``(low, high)`` of each constant (inclusive), by field path (``*``: any list index).
 RANGES: dict[str, tuple[float, float]] = {
     "room.width": (0.0, 10_000.0),
@@ -430,6 +434,13 @@ def _string(value: Any, path: str) -> str:
         raise ValueError(f"{path}: expected a non-empty string, got {_describe(value)}")
     if len(value) > MAX_NAME_CHARS:
         raise ValueError(f"{path}: {len(value)} characters, more than the limit of {MAX_NAME_CHARS}: {_quote(value)}")
+    if not value.isprintable():  # str.isprintable is fast; the categories say which characters are refused
+        for k, char in enumerate(value):
+            if unicodedata.category(char) in _CONTROL_CATEGORIES:
+                raise ValueError(
+                    f"{path}: {_quote(value)} holds a control character ({char!r} at index {k}); names are printed "
+                    "and used in file names"
+                )
     return value
 
 
@@ -636,6 +647,7 @@ def _check_layout(scenario: Scenario) -> None:
         if len(free) == 0:
             raise ValueError(f"robots[{u}].start: region {list(robot.start)} has no free cell")
         start_labels = np.unique(components[free[:, 0], free[:, 1]])
+        centres = (free + 0.5) * room.resolution  # the start points the env draws (radiomap.RadioMap.start_cells)
         for j, destination in enumerate(robot.destinations):
             path = f"robots[{u}].destinations[{j}]"
             ix, iy = room.cell_index(np.asarray(destination))
@@ -645,6 +657,22 @@ def _check_layout(scenario: Scenario) -> None:
                 raise ValueError(
                     f"{path}: {list(destination)} is unreachable from robots[{u}].start region {list(robot.start)}"
                 )
+            _check_arrival_radius(centres, destination, scenario.robot.arrival_radius, u, robot.start)
+
+
+def _check_arrival_radius(
+    centres: np.ndarray, destination: Vec2, arrival_radius: float, u: int, start: tuple[float, ...]
+) -> None:
+    """
+    :raises ValueError: every start point ``centres`` of robot ``u`` is within ``arrival_radius`` of ``destination``
+        (the robot would start arrived), with the message the env's mission sampler gives
+        (:class:`noma_radiomap.sampling.MissionSampler`)
+    """
+    goal = np.asarray(destination, dtype=np.float64)
+    if not (np.hypot(*(centres - goal).T) > arrival_radius).any():
+        raise ValueError(
+            f"robots[{u}].start: every free cell of {list(start)} is within arrival_radius of destination {list(destination)}"
+        )
 
 
 def _parse_scenario(data: Any, source: str | None) -> Scenario:

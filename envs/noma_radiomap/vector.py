@@ -8,6 +8,8 @@ destinations of its resets, its Rayleigh fading).
 """
 
 import os
+import reprlib
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -25,11 +27,45 @@ from noma_radiomap.scenario import Scenario
 __all__ = ["MissionView", "NomaRadioMapVecEnv", "check_num_envs", "make_vec_env"]
 
 
+#: The attributes of a mission that are the same for every mission: those of the vector env's engine
+#: (:class:`~noma_radiomap.core.MissionCore`) ...
+_SHARED_ATTRIBUTES: tuple[str, ...] = (
+    "scenario",
+    "radio_map",
+    "multiple_access",
+    "channel",
+    "inducing",
+    "task",
+    "observation",
+    "n_robots",
+    "max_steps",
+    "max_episode_steps",
+    "reward_constants",
+    "motion",
+)
+#: ... and the constants of the env class
+_CLASS_CONSTANTS: tuple[str, ...] = ("REWARD_PHASES", "REWARD_COMPONENTS", "GAIN_DB_RANGE")
+#: What to use instead of the single env's attributes that a mission of the vector env does not have
+_INSTEAD: dict[str, str] = {
+    "trajectory": "the vector env keeps no trajectories: record get_attr('positions') after each step, or use a "
+    "single env (gymnasium.make)",
+    "render": "the vector env does not render: render a single env (gymnasium.make(..., render_mode='rgb_array'))",
+    "reset": "reset the vector env (options={'reset_mask': ...} resets some missions)",
+    "step": "step the vector env",
+    "close": "close the vector env",
+    "core": "the vector env's engine is vec_env.core (every mission)",
+}
+
+
 class MissionView:
     """
     One mission of a vector env, seen as a single env by ``env_method`` / ``get_attr`` / ``call``:
-    ``set_reward_phase``, ``reward_weights``, ``reward_phase``, ``episode_summary``, the static attributes
-    (``scenario``, ``radio_map``, ``REWARD_PHASES``, ...) and the mission state (``positions``, ...).
+    ``set_reward_phase``, ``reward_weights``, ``reward_phase``, ``episode_summary``, the mission state
+    (``positions``, ``destinations``, ``arrived``, ``step_count``, ``np_random``), the spaces, ``render_mode``
+    (None), the attributes shared by every mission (``scenario``, ``radio_map``, ... :data:`_SHARED_ATTRIBUTES`)
+    and the env's constants (``REWARD_PHASES``, ...). Any other name, the single env's ``trajectory``, ``render``,
+    ``reset``, ``step`` included, raises an ``AttributeError`` naming it and what to use instead (so SB3's
+    ``has_attr`` says False).
 
     :param vec_env: the vector env
     :param index: the mission's index
@@ -79,14 +115,26 @@ class MissionView:
     def action_space(self) -> gym.spaces.Box:
         return self.vec_env.single_action_space
 
+    @property
+    def render_mode(self) -> None:
+        return None
+
     def __getattr__(self, name: str) -> Any:
-        # The static attributes and constants are those of the vector env's engine and of the env class
+        # Called for the names the class does not define: the shared attributes and the env's constants
+        if name in _SHARED_ATTRIBUTES:
+            return getattr(self.vec_env.core, name)
+        if name in _CLASS_CONSTANTS:
+            return getattr(NomaRadioMapEnv, name)
         if name.startswith("_"):
             raise AttributeError(name)
-        core = self.vec_env.core
-        if hasattr(core, name):
-            return getattr(core, name)
-        return getattr(NomaRadioMapEnv, name)
+        hint = _INSTEAD.get(name, f"a mission has {', '.join(_mission_attributes())}")
+        raise AttributeError(f"{name!r}: not an attribute of a mission of the vector env; {hint}")
+
+
+def _mission_attributes() -> list[str]:
+    """The public names a :class:`MissionView` answers, sorted."""
+    own = [name for name in vars(MissionView) if not name.startswith("_")]
+    return sorted({*own, *_SHARED_ATTRIBUTES, *_CLASS_CONSTANTS})
 
 
 def check_num_envs(value: Any, name: str = "num_envs") -> None:
@@ -185,7 +233,7 @@ class NomaRadioMapVecEnv(VectorEnv):
         Switch the reward phase of some missions (takes effect from their next step).
 
         :param name: one of :attr:`REWARD_PHASES`
-        :param indices: the missions (None: all)
+        :param indices: the missions (None: all; an index or a sequence of indices in ``[0, num_envs)``)
         """
         self.core.set_reward_phase(name, self._rows(indices))
 
@@ -222,11 +270,24 @@ class NomaRadioMapVecEnv(VectorEnv):
         return tuple(getattr(self.mission(i), name) for i in range(self.num_envs))
 
     def _rows(self, indices: Any) -> list[int]:
+        """
+        :param indices: None (every mission), an index or a sequence of indices
+        :return: the mission indices
+        :raises IndexError: an index is not an integer in ``[0, num_envs)`` (a negative one too), naming it
+        """
         if indices is None:
             return list(range(self.num_envs))
-        if isinstance(indices, int | np.integer):
-            return [int(indices)]
-        return [int(i) for i in indices]
+        items = [indices] if isinstance(indices, int | np.integer) else indices
+        try:
+            items = list(items)
+        except TypeError:
+            raise IndexError(
+                f"indices: expected None, a mission index or a sequence of them, got {reprlib.repr(indices)}"
+            ) from None
+        for i in items:
+            if isinstance(i, bool) or not isinstance(i, int | np.integer) or not 0 <= i < self.num_envs:
+                raise IndexError(f"indices: mission indices must be integers in [0, {self.num_envs}), got {reprlib.repr(i)}")
+        return [int(i) for i in items]
 
     # --- the batched engine (also driven by the SB3 face) ----------------------------------------
     @property
@@ -291,18 +352,55 @@ class NomaRadioMapVecEnv(VectorEnv):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict]:
+        """
+        Reset every mission, or those of ``options["reset_mask"]`` (a bool per mission). Everything is checked
+        before any mission changes: a refused seed, mask or option raises a ``ValueError`` naming it and leaves every
+        mission as it was.
+        """
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"options: expected a dict of reset options (or None), got {type(options).__name__}")
         options = dict(options or {})
-        mask = options.pop("reset_mask", None)
-        rows = np.arange(self.num_envs) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
-        if seed is None or isinstance(seed, int | np.integer):
-            seeds = [None] * len(rows) if seed is None else [int(seed) + int(i) for i in rows]
-        else:
-            if len(seed) != self.num_envs:
-                raise ValueError(f"seed: expected {self.num_envs} seeds (one per mission), got {len(seed)}")
-            seeds = [seed[i] for i in rows]
+        rows = self._reset_rows(options.pop("reset_mask", None))
+        seeds = self._reset_seeds(seed, rows)
         self.core.reset(rows, seeds, options or None)
         self._autoreset[rows] = False
         return self.core.observations(), {}
+
+    def _reset_rows(self, mask: Any) -> np.ndarray:
+        """:return: the missions a reset mask selects (None: all); :raises ValueError: not one bool per mission"""
+        n = self.num_envs
+        if mask is None:
+            return np.arange(n)
+        try:
+            array = np.asarray(mask)
+        except (TypeError, ValueError):  # a ragged sequence
+            raise ValueError(
+                f"options['reset_mask']: expected {n} booleans (one per mission), got a ragged sequence"
+            ) from None
+        if array.shape != (n,):
+            raise ValueError(f"options['reset_mask']: expected {n} booleans (one per mission), got shape {array.shape}")
+        if array.dtype != np.bool_:
+            raise ValueError(f"options['reset_mask']: expected booleans (dtype bool), got dtype {array.dtype}")
+        return np.flatnonzero(array)
+
+    def _reset_seeds(self, seed: Any, rows: np.ndarray) -> list[int | None]:
+        """:return: the seed of each reset mission; :raises ValueError: ``seed`` is not an integer (or None), nor
+        one per mission"""
+        if seed is None:
+            return [None] * len(rows)
+        if _is_seed(seed):
+            return [int(seed) + int(i) for i in rows]
+        if not isinstance(seed, list | tuple | np.ndarray):
+            raise ValueError(
+                f"seed: expected an integer >= 0, a list of {self.num_envs} (one per mission) or None, "
+                f"got {reprlib.repr(seed)}"
+            )
+        if len(seed) != self.num_envs:
+            raise ValueError(f"seed: expected {self.num_envs} seeds (one per mission), got {len(seed)}")
+        for i, value in enumerate(seed):
+            if value is not None and not _is_seed(value):
+                raise ValueError(f"seed[{i}]: expected an integer >= 0 or None, got {reprlib.repr(value)}")
+        return [None if seed[i] is None else int(seed[i]) for i in rows]
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         self.core.check_reset()
@@ -341,6 +439,11 @@ class NomaRadioMapVecEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         pass
+
+
+def _is_seed(value: Any) -> bool:
+    """Whether ``value`` is a seed: an integer >= 0, not a bool."""
+    return not isinstance(value, bool) and isinstance(value, int | np.integer) and value >= 0
 
 
 def _full(values: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:

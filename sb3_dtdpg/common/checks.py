@@ -9,7 +9,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_folder", "check_off_policy_settings", "check_total_timesteps"]
+__all__ = [
+    "check_callback",
+    "check_folder",
+    "check_log_interval",
+    "check_off_policy_settings",
+    "check_switches",
+    "check_total_timesteps",
+]
 
 
 def _is_int(value: Any) -> bool:
@@ -45,7 +52,9 @@ def _train_freq(owner: str, value: Any) -> None:
 
 
 def _net_arch(owner: str, policy_kwargs: Mapping[str, Any] | None) -> None:
-    net_arch = (policy_kwargs or {}).get("net_arch")
+    if not isinstance(policy_kwargs, Mapping):
+        raise ValueError(f"{owner}: policy_kwargs must be a dict, e.g. dict(net_arch=[64, 64]), got {policy_kwargs!r}")
+    net_arch = policy_kwargs.get("net_arch")
     if net_arch is None:
         return
     layers = [*net_arch.get("pi", []), *net_arch.get("qf", [])] if isinstance(net_arch, Mapping) else net_arch
@@ -71,7 +80,7 @@ def check_off_policy_settings(owner: str, settings: Mapping[str, Any]) -> None:
     ``learning_rate`` (a schedule's initial value) finite and > 0, ``buffer_size``, ``batch_size`` and ``n_steps``
     >= 1, ``learning_starts`` >= 0, ``gamma`` in [0, 1], ``tau`` in (0, 1], ``train_freq`` >= 1 (with unit
     ``"step"`` or ``"episode"``), ``gradient_steps`` >= 0 (0: collect only) or -1 (SB3: as many as env steps),
-    and the layer sizes of ``policy_kwargs["net_arch"]`` >= 1.
+    ``n_steps`` <= ``buffer_size`` (when both are given), and the layer sizes of ``policy_kwargs["net_arch"]`` >= 1.
 
     :param owner: what the settings are for, at the start of the message (e.g. ``"DTDPG"``)
     :param settings: the constructor arguments; absent or None ones are not checked
@@ -87,6 +96,9 @@ def check_off_policy_settings(owner: str, settings: Mapping[str, Any]) -> None:
         raise ValueError(f"{owner}: tau must be a number in (0, 1], got {tau!r}")
     if gradient_steps is not None and (not _is_int(gradient_steps) or gradient_steps < -1):
         raise ValueError(f"{owner}: gradient_steps must be an integer >= 0, or -1, got {gradient_steps!r}")
+    n_steps, buffer_size = settings.get("n_steps"), settings.get("buffer_size")
+    if n_steps is not None and buffer_size is not None and n_steps > buffer_size:  # each return reads n_steps rows
+        raise ValueError(f"{owner}: n_steps must be at most buffer_size ({buffer_size}), got {n_steps!r}")
 
 
 def check_total_timesteps(total_timesteps: Any) -> None:
@@ -96,6 +108,40 @@ def check_total_timesteps(total_timesteps: Any) -> None:
     """
     if not _is_int(total_timesteps) or total_timesteps < 1:
         raise ValueError(f"learn(): total_timesteps must be a positive integer, got {total_timesteps!r}")
+
+
+def check_switches(owner: str, switches: Mapping[str, Any]) -> None:
+    """
+    :param owner: what the settings are for, at the start of the message
+    :param switches: on/off settings by name
+    :raises ValueError: naming the first that is not True or False (a string such as ``"no"`` would count as on)
+    """
+    for name, value in switches.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{owner}: {name} must be True or False, got {value!r}")
+
+
+def check_log_interval(log_interval: Any) -> None:
+    """
+    :param log_interval: ``learn()``'s episodes between log dumps (None: never)
+    :raises ValueError: unless it is None or a positive integer
+    """
+    if log_interval is not None and (not _is_int(log_interval) or log_interval < 1):
+        raise ValueError(f"learn(): log_interval must be a positive integer or None, got {log_interval!r}")
+
+
+def check_callback(callback: Any) -> None:
+    """
+    :param callback: ``learn()``'s callback: None, an SB3 ``BaseCallback``, a function of ``(locals, globals)``, or a
+        list of these
+    :raises ValueError: naming the entry that is none of these
+    """
+    for entry in callback if isinstance(callback, list) else [callback]:
+        if entry is not None and not callable(entry) and not hasattr(entry, "on_step"):
+            raise ValueError(
+                f"learn(): callback must be a BaseCallback, a function or a list of these, got {type(entry).__name__} "
+                f"{entry!r}"
+            )
 
 
 def check_folder(owner: str, name: str, path: str | os.PathLike[str] | None) -> None:

@@ -29,6 +29,19 @@ TEMP_PREFIX = "."
 _TEMP_SUFFIX = ".tmp"
 
 
+def _new_file_mode() -> int:
+    """The mode ``open(path, "w")`` gives a new file: 0666 less the process's umask (read without changing it)."""
+    try:  # Linux: the umask is in /proc, so no other thread sees it change
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return 0o666 & ~int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    umask = os.umask(0o022)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> Path:
     """
     Write a file so that a reader sees either the old file or the complete new one, never a part.
@@ -47,6 +60,7 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> 
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f"{TEMP_PREFIX}{path.name}.", suffix=_TEMP_SUFFIX, dir=path.parent)
     os.close(fd)
+    os.chmod(tmp, _new_file_mode())  # mkstemp makes the file private (0600); open() would give 0666 less the umask
     try:
         write(tmp)
         os.replace(tmp, path)

@@ -15,7 +15,14 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from sb3_dtdpg import env_settings
 from sb3_dtdpg.common.buffers import FastNStepReplayBuffer, reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
-from sb3_dtdpg.common.checks import check_folder, check_off_policy_settings, check_total_timesteps
+from sb3_dtdpg.common.checks import (
+    check_callback,
+    check_folder,
+    check_log_interval,
+    check_off_policy_settings,
+    check_switches,
+    check_total_timesteps,
+)
 from sb3_dtdpg.common.noise import decaying_noise
 from sb3_dtdpg.common.phases import Phase, default_curriculum, parse_phases
 from sb3_dtdpg.dtdpg.lean import LeanStep
@@ -153,7 +160,17 @@ class DTDPG(LeanStep, DDPG):
             policy_kwargs=policy_kwargs,
         )
         check_off_policy_settings("DTDPG", settings)
+        check_switches(
+            "DTDPG",
+            dict(
+                optimize_memory_usage=optimize_memory_usage,
+                reinitialize_at_transfer=reinitialize_at_transfer,
+                lean=lean,
+                backprop=backprop,
+            ),
+        )
         check_folder("DTDPG", "curriculum_save_path", curriculum_save_path)
+        check_folder("DTDPG", "tensorboard_log", tensorboard_log)
         super().__init__(
             policy=policy,
             env=env,
@@ -265,6 +282,8 @@ class DTDPG(LeanStep, DDPG):
         :return: the trained model
         """
         check_total_timesteps(total_timesteps)
+        check_log_interval(log_interval)
+        check_callback(callback)
         user_callbacks: list[BaseCallback] = []
         for user_callback in callback if isinstance(callback, list) else [callback]:
             if user_callback is not None:
@@ -301,6 +320,9 @@ class DTDPG(LeanStep, DDPG):
 
     @classmethod
     def load(cls, path: Any, env: GymEnv | None = None, device: Any = "auto", custom_objects: Any = None, **kwargs: Any):
+        # settings given as keyword arguments replace the saved ones: the constructor's checks hold for them too
+        # (custom_objects are not checked: they stand in for objects that cannot be unpickled, e.g. learning_rate=0)
+        check_off_policy_settings("DTDPG.load", kwargs)
         if env is not None:
             data, _, _ = load_from_zip_file(path, device="cpu", custom_objects=custom_objects, load_data=True)
             env_settings.check_settings((data or {}).get("env_settings"), env, f"the model {path}")

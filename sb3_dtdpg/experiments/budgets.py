@@ -7,7 +7,11 @@ from typing import Any
 
 from sb3_dtdpg.experiments.specs import RunSpec
 
-__all__ = ["BUDGETS", "BUDGET_ALIASES", "PUBLIC_BUDGETS", "Budget", "check_budget", "get_budget"]
+__all__ = ["BUDGETS", "BUDGET_ALIASES", "MAX_SEEDS", "PUBLIC_BUDGETS", "Budget", "check_budget", "check_seeds", "get_budget"]
+
+#: The most seeds per configuration a job takes (seeds 0..N-1): 1,000 paper-scale runs of one configuration take weeks
+#: of CPU, and a mistyped count (10**11) would fill the memory with run specs before anything ran.
+MAX_SEEDS = 1_000
 
 
 @dataclass(frozen=True)
@@ -99,6 +103,15 @@ def get_budget(budget: str | Budget) -> Budget:
     if budget not in BUDGETS:
         raise ValueError(f"budget must be one of {', '.join(PUBLIC_BUDGETS)}, got {budget!r}")
     return BUDGETS[budget]
+
+
+def check_seeds(seeds: object) -> None:
+    """
+    :param seeds: the number of seeds per configuration of a job
+    :raises ValueError: unless it is an integer in [1, :data:`MAX_SEEDS`]
+    """
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
+        raise ValueError(f"seeds must be an integer from 1 to {MAX_SEEDS:,} (seeds 0..N-1 per configuration), got {seeds!r}")
 
 
 def check_budget(spec: RunSpec) -> None:

@@ -15,6 +15,7 @@ from typing import Any
 
 import pandas as pd
 
+from sb3_dtdpg.experiments.budgets import check_seeds
 from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
 __all__ = ["compare_specs", "evaluate_planners", "format_room_margins", "room_margins", "run_compare"]
@@ -228,8 +229,7 @@ def _check_arguments(algos: Sequence[str], modes: Sequence[str], hyperparams: st
     for algo in algos:
         check_hyperparams(algo, hyperparams)
     check_observation(observation)
-    if seeds < 1:
-        raise ValueError(f"seeds must be >= 1, got {seeds!r}")
+    check_seeds(seeds)
 
 
 def run_compare(

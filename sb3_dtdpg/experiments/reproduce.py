@@ -33,6 +33,7 @@ from sb3_dtdpg.baselines import base_learning_rate
 from sb3_dtdpg.common.files import write_csv, write_text
 from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import plots, tables
+from sb3_dtdpg.experiments.budgets import check_seeds
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
 from sb3_dtdpg.experiments.paper_task import paper_task_specs, paper_task_tables
 from sb3_dtdpg.experiments.runs import Budget, RunReport, RunSpec, get_budget, load_result, output_lock, run_many
@@ -253,8 +254,7 @@ def _check_arguments(
 ) -> None:
     from noma_radiomap.registration import check_observation
 
-    if seeds < 1:
-        raise ValueError(f"seeds must be >= 1, got {seeds!r}")
+    check_seeds(seeds)
     check_observation(observation)
     unknown = sorted(set(experiments or ()) - set(EXPERIMENTS))
     if unknown:
