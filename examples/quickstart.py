@@ -28,7 +28,10 @@ def main() -> None:
     parser.add_argument("--timesteps", type=int, default=5_000, help="training env steps")
     parser.add_argument("--env", default="NomaRadioMap-v0", help="a NomaRadioMap env id")
     parser.add_argument(
-        "--observation", default="goal", choices=["goal", "paper"], help="goal-conditioned (default) or the paper's state"
+        "--observation",
+        default="goal",
+        choices=["goal", "destinations", "paper"],
+        help="goal-conditioned (default), destinations (positions, destinations, gains) or the paper's state",
     )
     parser.add_argument("--eval-episodes", type=int, default=5, help="test episodes (Rayleigh fading)")
     parser.add_argument("--seed", type=int, default=0, help="training seed")

@@ -77,16 +77,18 @@ def _user_errors(args: argparse.Namespace) -> Iterator[None]:
 def _busy_folder_errors(args: argparse.Namespace) -> contextlib.AbstractContextManager[None]:
     """
     A folder in use by another job (``OutputBusyError``), one holding another run under the same id
-    (``RunMismatchError``) or a run whose training diverged (``RunDivergedError``, e.g. a learning rate far too
-    large) as one ``error:`` line of the subcommand (exit status 2).
+    (``RunMismatchError``), a run record or checkpoint damaged from outside (``DamagedRecordError``, naming the
+    file and what to delete) or a run whose training diverged (``RunDivergedError``, e.g. a learning rate far too
+    large) as one ``error:`` line of the subcommand (exit status 2). Other errors (a ``ValueError`` of training
+    itself, say) keep their traceback.
     """
-    from sb3_dtdpg.experiments.runs import OutputBusyError, RunDivergedError, RunMismatchError
+    from sb3_dtdpg.experiments.runs import DamagedRecordError, OutputBusyError, RunDivergedError, RunMismatchError
 
     @contextlib.contextmanager
     def guard() -> Iterator[None]:
         try:
             yield
-        except (OutputBusyError, RunMismatchError, RunDivergedError) as error:
+        except (OutputBusyError, RunMismatchError, DamagedRecordError, RunDivergedError) as error:
             args.error(str(error))
 
     return guard()
@@ -232,7 +234,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str) -> int:
     """``train`` on a NomaRadioMap env: a run of :func:`sb3_dtdpg.experiments.runs.run_one`, checkpointed."""
-    from sb3_dtdpg.experiments.runs import RunSpec, output_lock, read_checkpoint, run_one
+    from sb3_dtdpg.experiments.runs import DamagedRecordError, RunSpec, output_lock, read_checkpoint, run_one
 
     spec = RunSpec(
         args.algo,
@@ -268,7 +270,11 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
     except MemoryError as error:
         args.error(f"not enough memory for this run ({error or 'MemoryError'}): lower buffer_size or batch_size")
     except KeyboardInterrupt:
-        checkpoint = read_checkpoint(run_dir)
+        try:
+            checkpoint = read_checkpoint(run_dir)
+        except DamagedRecordError as error:  # changed from outside while the run trained
+            print(f"interrupted: {error}", file=sys.stderr)
+            return 130
         if checkpoint is None:
             saved = f"nothing saved yet (the first checkpoint comes after {args.checkpoint_every} episodes)"
         else:

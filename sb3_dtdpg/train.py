@@ -9,7 +9,8 @@ own ``zoo_configs/<algo>.yml`` is used (:func:`sb3_dtdpg.zoo.default_config`). N
 
 A mistake in the hyperparameters (a file entry or a ``-params`` value: an unknown key such as ``learnin_rate``,
 a ``net_arch`` too large to allocate) is one ``error:`` line with a did-you-mean and exit status 2, before
-the zoo creates its log folder (:func:`sb3_dtdpg.overrides.check_constructor_kwargs`).
+the zoo creates its log folder (:func:`sb3_dtdpg.overrides.check_constructor_kwargs`); so are zoo flags that
+cannot run together (``--trial-id`` without ``--storage`` and ``--study-name``).
 """
 
 import sys
@@ -76,6 +77,7 @@ def main() -> None:
     import rl_zoo3.train
 
     from sb3_dtdpg.overrides import HyperparameterError
+    from sb3_dtdpg.zoo import ZooOptionError
 
     register_dtdpg()
     sys.argv[1:] = with_default_threads(sys.argv[1:])
@@ -83,7 +85,7 @@ def main() -> None:
     rl_zoo3.train.ExperimentManager = _checked_manager(ExperimentManager)  # type: ignore[misc]
     try:
         rl_zoo3.train.train()
-    except HyperparameterError as error:
+    except (HyperparameterError, ZooOptionError) as error:
         print(f"python -m sb3_dtdpg.train: error: {error}", file=sys.stderr)
         sys.exit(2)
 

@@ -39,6 +39,11 @@ from sb3_dtdpg.overrides import HyperparameterError
 
 ALGO_NAME = "dtdpg"
 
+
+class ZooOptionError(ValueError):
+    """Zoo flags that cannot run together (``python -m sb3_dtdpg.train`` prints it as one ``error:`` line, exit 2)."""
+
+
 # Hidden layers (actor and critic alike). The paper uses 64-128 units per layer (Section V).
 NET_ARCHS: dict[str, list[int]] = {
     "64-64": [64, 64],
@@ -207,7 +212,7 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
                 self.config = str(path)
         if self.trial_id is not None:
             if not (self.storage and self.study_name):
-                raise ValueError(
+                raise ZooOptionError(
                     f"--trial-id {self.trial_id} needs --storage and --study-name to find the trial, "
                     f"got storage={self.storage!r}, study_name={self.study_name!r}"
                 )

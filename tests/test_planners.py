@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import noma_radiomap  # noqa: F401
+import noma_radiomap
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
 from noma_radiomap.planners import CommAwarePlanner, RandomPlanner, ReferencePlanner, ShortestPathPlanner, channel_maps
 from noma_radiomap.propagation import dbm_to_watt
@@ -196,3 +196,27 @@ def test_a_planner_keeps_the_radio_map_its_cache_is_keyed_on(planner_cls):
     radiomap._cached_radio_map.cache_clear()
     gc.collect()
     assert held() is not None
+
+
+def test_the_exhaustive_planners_refuse_more_robots_than_they_can_search(tmp_path):
+    # 200 robots: a MemoryError of the comm-aware planner's 3^U grid; 7: minutes per mission for the best planner
+    import yaml
+
+    from noma_radiomap.planners import MAX_PLANNER_ROBOTS
+
+    data = noma_radiomap.load_scenario("small").to_dict()
+    data["robots"] = [data["robots"][u % 2] for u in range(MAX_PLANNER_ROBOTS + 1)]
+    path = tmp_path / "crowd.yaml"
+    path.write_text(yaml.safe_dump(data))
+    env = gym.make("NomaRadioMap-v0", scenario=str(path))
+    env.reset(seed=0)
+    for planner in (ReferencePlanner(), CommAwarePlanner(), ShortestPathPlanner(power="best")):
+        with pytest.raises(ValueError, match=f"has {MAX_PLANNER_ROBOTS + 1} robots, more than the {MAX_PLANNER_ROBOTS}"):
+            planner.reset(env.unwrapped)
+            planner.act(env.unwrapped, None)
+    ShortestPathPlanner().reset(env.unwrapped)  # the equal split takes any number
+    from sb3_dtdpg.experiments.compare import run_compare
+
+    with pytest.raises(ValueError, match=r"compare's reference planners on .*crowd\.yaml: the scenario has 7 robots"):
+        run_compare(tmp_path / "out", budget="tiny", scenario=str(path))  # before any run trains
+    assert not (tmp_path / "out").exists()

@@ -3,6 +3,8 @@
 import dataclasses
 import json
 import os
+import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -15,6 +17,7 @@ from sb3_dtdpg.cli import main
 from sb3_dtdpg.experiments.compare import compare_specs, run_compare
 from sb3_dtdpg.experiments.runs import (
     BUDGETS,
+    DamagedRecordError,
     OutputBusyError,
     PeriodicCheckpoint,
     RunDivergedError,
@@ -218,6 +221,20 @@ def test_a_damaged_record_is_a_named_error(tmp_path, name, content):
 
 
 def test_a_damaged_checkpoint_model_is_a_named_error(tmp_path, monkeypatch):
+    _stop_after_first_checkpoint(monkeypatch)
+    with pytest.raises(KeyboardInterrupt):
+        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    monkeypatch.undo()
+    run_dir = tmp_path / "runs" / SPEC.run_id
+    (model := next(run_dir.glob("checkpoints/*/model.zip"))).write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match=rf"checkpoint in {model.parent} cannot be loaded .*delete .*checkpoint\.json"):
+        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    (run_dir / "checkpoint.json").unlink()  # the fix the message names
+    assert run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)["train"]["resumed_at_episode"] is None
+
+
+def _stop_after_first_checkpoint(patch):
+    """Make training raise ``KeyboardInterrupt`` right after its first checkpoint (``patch``: a monkeypatch)."""
     original = PeriodicCheckpoint._on_rollout_end
 
     def interrupt_after_first_checkpoint(self):
@@ -226,16 +243,151 @@ def test_a_damaged_checkpoint_model_is_a_named_error(tmp_path, monkeypatch):
         if due:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(PeriodicCheckpoint, "_on_rollout_end", interrupt_after_first_checkpoint)
-    with pytest.raises(KeyboardInterrupt):
+    patch.setattr(PeriodicCheckpoint, "_on_rollout_end", interrupt_after_first_checkpoint)
+
+
+def _interrupt_after_first_checkpoint(spec, out, monkeypatch):
+    """
+    Train ``spec`` into ``out`` with a checkpoint every episode, interrupted right after the first one.
+
+    :return: the run's folder and its ``checkpoint.json``
+    """
+    with monkeypatch.context() as patch:
+        _stop_after_first_checkpoint(patch)
+        with pytest.raises(KeyboardInterrupt):
+            run_one(spec, out, resume=True, checkpoint_every=1)
+    run_dir = out / "runs" / spec.run_id
+    return run_dir, json.loads((run_dir / "checkpoint.json").read_text())
+
+
+def _files(folder):
+    return {path: path.read_bytes() for path in sorted(folder.rglob("*")) if path.is_file()}
+
+
+def test_a_checkpoint_model_of_another_algorithm_or_run_is_refused(tmp_path, monkeypatch):
+    from stable_baselines3 import TD3
+
+    from sb3_dtdpg.baselines import make_env
+    from sb3_dtdpg.experiments.specs import build_model
+
+    dtdpg = dataclasses.replace(SPEC, algo="dtdpg")
+    finished = run_one(dtdpg, tmp_path / "other")  # another run's finished model, of the same settings
+    for spec, foreign, reason in [
+        (dtdpg, "ddpg", r"policy_class: '.*TD3Policy' in the model, '.*DTDPGPolicy' in the run"),  # the hunter's case
+        (dtdpg, "finished", rf"num_timesteps: {finished['train']['timesteps']} in the model, \d+ in .*checkpoint\.json"),
+        (SPEC, "td3", r"batch_size: 256 in the model, 64 in the run"),  # TD3's policy class is DDPG's
+    ]:
+        run_dir, checkpoint = _interrupt_after_first_checkpoint(spec, tmp_path / f"{spec.algo}_{foreign}", monkeypatch)
+        model = run_dir / checkpoint["folder"] / "model.zip"
+        if foreign == "finished":
+            shutil.copyfile(tmp_path / "other" / "runs" / dtdpg.run_id / "model.zip", model)
+        else:  # at the step count the record names: only the algorithm tells
+            env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
+            other = build_model(SPEC, env) if foreign == "ddpg" else TD3("MlpPolicy", env, buffer_size=100)
+            other.num_timesteps = checkpoint["timesteps"]
+            other.save(model)
+            env.close()
+        kept = _files(run_dir)
+        folder, pointer = re.escape(str(model.parent)), re.escape(str(run_dir / "checkpoint.json"))
+        match = rf"checkpoint in {folder} is not this run's \(.*{reason}.*; delete {pointer} to start the run afresh"
+        with pytest.raises(DamagedRecordError, match=match):
+            run_one(spec, tmp_path / f"{spec.algo}_{foreign}", resume=True, checkpoint_every=1)
+        assert _files(run_dir) == kept  # nothing removed behind the user's back
+
+
+@pytest.mark.parametrize("removed", ["folder", "model.zip", "replay_buffer.pkl"])
+def test_a_checkpoint_record_whose_checkpoint_is_gone_is_a_named_error(tmp_path, monkeypatch, removed):
+    run_dir, checkpoint = _interrupt_after_first_checkpoint(SPEC, tmp_path, monkeypatch)
+    folder = run_dir / checkpoint["folder"]
+    if removed == "folder":
+        shutil.rmtree(folder)
+    else:
+        (folder / removed).unlink()
+    kept = _files(run_dir)
+    what = "model.zip" if removed == "folder" else removed
+    pointer = run_dir / "checkpoint.json"
+    with pytest.raises(
+        DamagedRecordError, match=rf"{re.escape(str(folder))}.* has no {what} .*; delete {re.escape(str(pointer))} to start"
+    ):
         run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
-    monkeypatch.setattr(PeriodicCheckpoint, "_on_rollout_end", original)
-    run_dir = tmp_path / "runs" / SPEC.run_id
-    (model := next(run_dir.glob("checkpoints/*/model.zip"))).write_bytes(b"not a zip")
-    with pytest.raises(ValueError, match=rf"checkpoint in {model.parent} cannot be loaded .*delete .*checkpoint\.json"):
-        run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
-    (run_dir / "checkpoint.json").unlink()  # the fix the message names
+    assert _files(run_dir) == kept and run_dir.exists()  # before: the run folder was deleted and the run started afresh
+    pointer.unlink()  # the fix the message names
     assert run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)["train"]["resumed_at_episode"] is None
+
+
+def test_checkpoints_interrupted_while_written_or_removed_are_no_error(tmp_path, monkeypatch):
+    # a kill while the next checkpoint was written leaves a partial folder that the record does not name
+    run_dir, checkpoint = _interrupt_after_first_checkpoint(SPEC, tmp_path / "a", monkeypatch)
+    partial = run_dir / "checkpoints" / f"episode_{checkpoint['episodes'] + 1}"
+    partial.mkdir()
+    (partial / ".model.zip.killed.tmp").write_bytes(b"par")
+    result = run_one(SPEC, tmp_path / "a", resume=True, checkpoint_every=1)
+    assert result["train"]["resumed_at_episode"] == checkpoint["episodes"] and not (run_dir / "checkpoints").exists()
+    # a kill while a fresh start (compare's runs do not resume) removed the run's folder, checkpoints first
+    run_dir, _ = _interrupt_after_first_checkpoint(SPEC, tmp_path / "b", monkeypatch)
+    rmtree = shutil.rmtree
+
+    def killed_while_removing(path, *args, **kwargs):
+        if os.fspath(path) == os.fspath(run_dir):
+            rmtree(run_dir / "checkpoints", ignore_errors=True)  # in the worst order: the checkpoints first
+            raise KeyboardInterrupt
+        rmtree(path, *args, **kwargs)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(shutil, "rmtree", killed_while_removing)
+        with pytest.raises(KeyboardInterrupt):
+            run_one(SPEC, tmp_path / "b", checkpoint_every=1)
+    assert run_one(SPEC, tmp_path / "b", resume=True, checkpoint_every=1)["train"]["resumed_at_episode"] is None
+
+
+def test_steps_per_s_of_a_resumed_run_counts_the_steps_it_trained(tmp_path, monkeypatch):
+    _, checkpoint = _interrupt_after_first_checkpoint(SPEC, tmp_path, monkeypatch)
+    train = run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)["train"]
+    assert train["resumed_at_episode"] == 1 and train["timesteps"] > checkpoint["timesteps"] > 0
+    # before: all the run's steps over the resumed part's wall time
+    assert train["steps_per_s"] == pytest.approx((train["timesteps"] - checkpoint["timesteps"]) / train["wall_s"])
+
+
+@pytest.mark.parametrize("damage", ["truncated replay buffer", "checkpoint folder removed", "result.json"])
+def test_a_damaged_run_record_is_one_error_line_of_train(tmp_path, monkeypatch, capsys, damage):
+    monkeypatch.chdir(tmp_path)  # the default TensorBoard folder is relative
+    argv = [*TRAIN, "--out", str(tmp_path / "o"), "--checkpoint-every", "1"]
+    with monkeypatch.context() as patch:
+        _stop_after_first_checkpoint(patch)
+        assert main(argv) == 130
+    (run_dir,) = (tmp_path / "o" / "runs").iterdir()
+    pointer = run_dir / "checkpoint.json"
+    folder = run_dir / json.loads(pointer.read_text())["folder"]
+    if damage == "truncated replay buffer":
+        buffer = folder / "replay_buffer.pkl"
+        buffer.write_bytes(buffer.read_bytes()[:100])
+        message = f"the checkpoint in {folder} cannot be loaded (UnpicklingError"
+    elif damage == "checkpoint folder removed":
+        shutil.rmtree(folder)
+        message = f"delete {pointer} to start the run afresh"
+    else:
+        (run_dir / "result.json").write_text("{trunc")
+        message = f"{run_dir / 'result.json'} is unreadable"
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    printed = capsys.readouterr()
+    assert exit_info.value.code == 2 and "Traceback" not in printed.err, printed.err  # before: 35 lines, exit 1
+    errors = [line for line in printed.err.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith("sb3-dtdpg train: error: ") and message in errors[0], printed.err
+    assert pointer.exists()  # nothing removed behind the user's back
+
+
+def test_an_error_of_training_itself_is_no_user_error_of_train(tmp_path, monkeypatch):
+    from sb3_dtdpg.experiments import runs
+
+    def broken(*args, **kwargs):
+        raise ValueError("a bug in training")
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(runs, "_train", broken)
+    with pytest.raises(ValueError, match="a bug in training"):  # a traceback, not one error line of the user's
+        main([*TRAIN, "--out", "o"])
 
 
 def test_a_full_disk_at_the_result_leaves_no_partial_file_and_a_rerun_finishes(tmp_path, monkeypatch):

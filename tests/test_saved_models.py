@@ -398,3 +398,19 @@ def test_enjoy_writes_at_most_max_frames(saved_dtdpg, tmp_path, capsys):
         assert len(frames) <= max_frames and frames[-1] == 60 and frames == sorted(set(frames))
     with pytest.raises(ValueError, match="max_frames must be >= 1"):
         frame_steps(60, 0)
+
+
+def test_a_replay_buffer_of_another_observation_layout_is_refused_and_the_models_kept(tmp_path):
+    # it loaded, and learn() then died in a bare broadcast error at the next stored transition
+    tiny = dict(learning_starts=10, batch_size=8, policy_kwargs=dict(net_arch=[8]), seed=0)
+    source = DTDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario="small", observation="goal"), **tiny)
+    source.learn(20)
+    source.save_replay_buffer(tmp_path / "buffer.pkl")
+    model = DTDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario="small", observation="paper"), **tiny)
+    own = model.replay_buffer
+    with pytest.raises(ValueError, match=r"does not fit this model: observation space Box\(.*\(18,\).* \(the model's: Box"):
+        model.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert model.replay_buffer is own
+    twin = DTDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario="small", observation="goal"), **tiny)
+    twin.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert twin.replay_buffer.pos == 20

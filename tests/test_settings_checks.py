@@ -114,3 +114,33 @@ def test_the_curriculum_callback_refuses_a_file_as_its_folder(tmp_path):
     (tmp_path / "taken").write_text("")
     with pytest.raises(ValueError, match="CurriculumTransferCallback: save_path must be a folder, got the file"):
         CurriculumTransferCallback([Phase("train", reward_phase=None)], save_path=tmp_path / "taken")
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("episodes", 2.5, "RunSpec.episodes: expected an integer from 1"),
+        ("seed", 1.5, "RunSpec.seed: expected an integer from 0"),  # was a numpy TypeError at the first reset
+        ("seed", "0", "RunSpec.seed: expected an integer from 0"),
+        ("eval_episodes", 0, "RunSpec.eval_episodes: expected an integer from 1"),  # all failed after training
+        ("eval_seed", -1, "RunSpec.eval_seed: expected an integer from 0"),
+        ("eval_channel", "x", "RunSpec.eval_channel: expected one of ('radio_map', 'rayleigh'), got 'x'"),
+        ("destination_episodes", 0, "RunSpec.destination_episodes: expected an integer from 1"),  # trained 2
+        ("tag", "a/b", "RunSpec.tag: expected letters, digits and ._+-"),  # a nested run folder
+    ],
+)
+def test_a_run_spec_no_run_can_have_is_refused_when_made(field, value, message):
+    from sb3_dtdpg.experiments.specs import RunSpec
+
+    with pytest.raises(ValueError, match=re.escape(message)):
+        RunSpec("dtdpg", "noma", **{"seed": 0, "episodes": 3, field: value})
+
+
+def test_a_run_spec_with_an_unknown_override_is_refused_before_training():
+    from sb3_dtdpg.experiments.specs import RunSpec, run_identity
+
+    spec = RunSpec("dtdpg", "noma", 0, 3, scenario="small", overrides=(("gamam", "0.9"),))
+    with pytest.raises(
+        ValueError, match=r"unknown hyperparameter 'gamam' for DTDPG \(RunSpec.overrides\); did you mean 'gamma'"
+    ):
+        run_identity(spec)

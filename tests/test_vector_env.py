@@ -434,3 +434,27 @@ def test_max_episode_steps_of_the_vector_env_must_be_an_integer(value):
     ):
         NomaRadioMapVecEnv(2, scenario="small", max_episode_steps=value)
     assert NomaRadioMapVecEnv(2, scenario="small", max_episode_steps=np.int64(5)).max_episode_steps == 5
+
+
+def test_study_worker_takes_the_cli_options_and_defaults(monkeypatch, capsys):
+    """The worker's runs are those ``sb3-dtdpg reproduce`` / ``compare`` train with the same options (same run ids)."""
+    from sb3_dtdpg.experiments import distributed
+    from sb3_dtdpg.experiments.budgets import BUDGETS
+    from sb3_dtdpg.experiments.compare import compare_specs
+    from sb3_dtdpg.experiments.reproduce import DEFAULT_EXPERIMENTS, reproduce_specs
+
+    taken = {}
+
+    def worker(specs, *args):
+        taken["ids"] = specs
+        return []
+
+    monkeypatch.setattr(distributed, "run_study_worker", worker)
+    storage = ["--out", "out", "--storage", "s.log", "--study-name", "job"]
+    distributed.main(["reproduce", "--budget", "tiny", *storage])
+    by_experiment = reproduce_specs(BUDGETS["tiny"], BUDGETS["tiny"].seeds, "tuned", "goal")
+    expected = {spec.run_id for name in DEFAULT_EXPERIMENTS for spec in by_experiment[name]}
+    assert {spec.run_id for spec in taken.pop("ids")} == expected
+    distributed.main(["compare", "--budget", "tiny", "--seeds", "1", "--hyperparams", "paper", *storage])
+    assert [s.run_id for s in taken.pop("ids")] == [s.run_id for s in compare_specs(BUDGETS["tiny"], 1, hyperparams="paper")]
+    assert "--seeds is deprecated, use --n-seeds" in capsys.readouterr().err

@@ -53,6 +53,14 @@ def test_bad_env_kwargs_are_one_error_line_before_the_log_folder(tmp_path):
     assert not (tmp_path / "logs").exists()
 
 
+def test_trial_id_without_storage_is_one_error_line(tmp_path):
+    done = zoo_train(tmp_path, "--trial-id", "0")
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    errors = [line for line in done.stderr.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith("python -m sb3_dtdpg.train: error: --trial-id 0 needs --storage")
+    assert not (tmp_path / "logs").exists()
+
+
 @pytest.mark.parametrize(
     ("argv", "expected"),
     [

@@ -38,6 +38,7 @@ from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import dbm_to_watt
 
 __all__ = [
+    "MAX_PLANNER_ROBOTS",
     "CommAwarePlanner",
     "GridPlanner",
     "RandomPlanner",
@@ -92,6 +93,26 @@ def _env_state(env: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     positions = np.asarray(env.positions, dtype=np.float64).reshape(-1, 2)
     destinations = np.asarray(env.destinations, dtype=np.float64).reshape(-1, 2)
     return positions, destinations, np.asarray(env.arrived, dtype=bool).reshape(-1)
+
+
+#: The most robots the exact planners take: they search every subset of the robots for the power split (2^U),
+#: the comm-aware planner a grid of power levels (3^U and more) and the best planner every combination of the robots'
+#: candidate paths (5^U): 6 robots take seconds per mission, 7 minutes, 200 more memory than a machine has.
+MAX_PLANNER_ROBOTS = 6
+
+
+def check_planner_robots(n_robots: int, planner: str) -> None:
+    """
+    :param n_robots: the scenario's robots
+    :param planner: what plans, for the message
+    :raises ValueError: more robots than :data:`MAX_PLANNER_ROBOTS`
+    """
+    if n_robots > MAX_PLANNER_ROBOTS:
+        raise ValueError(
+            f"{planner}: the scenario has {n_robots} robots, more than the {MAX_PLANNER_ROBOTS} its exhaustive search "
+            "takes (its cost grows exponentially with the robots); ShortestPathPlanner() (equal power) and "
+            "RandomPlanner take any number"
+        )
 
 
 class RandomPlanner:
@@ -302,6 +323,7 @@ class CommAwarePlanner(GridPlanner):
     def _setup(self, env: Any) -> None:
         if self._stale(env):
             n_robots = env.scenario.n_robots
+            check_planner_robots(n_robots, "CommAwarePlanner")
             levels = self.levels or max(3, min(21, int(2000 ** (1.0 / n_robots))))
             self._grid = np.array(list(itertools.product(np.linspace(-1.0, 1.0, levels), repeat=n_robots)))
         super()._setup(env)
@@ -401,6 +423,7 @@ def min_outage_power(
     gain, interference_w = np.asarray(gain, dtype=np.float64), np.asarray(interference_w, dtype=np.float64)
     active = np.asarray(active, dtype=bool)
     n_rows, n_robots = gain.shape
+    check_planner_robots(n_robots, "min_outage_power (the best power split)")
     max_power_w = float(dbm_to_watt(scenario.ap.max_power_dbm))
     best_power = np.zeros(gain.shape)
     best_key = np.full(n_rows, np.inf)
@@ -820,6 +843,7 @@ class ReferencePlanner:
 
     def _search(self, env: Any, positions: np.ndarray, destinations: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         n_robots = len(positions)
+        check_planner_robots(n_robots, "ReferencePlanner")
         candidates = [self._candidates(env, u, positions, destinations) for u in range(n_robots)]
         penalty = env.scenario.mission.outage_penalty
         best: tuple[float, tuple[int, ...]] | None = None

@@ -318,6 +318,32 @@ class DTDPG(LeanStep, DDPG):
         env_settings.check_settings(getattr(self, "env_settings", None), env)
         super().set_env(env, force_reset=force_reset)
 
+    def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
+        """
+        SB3's ``load_replay_buffer``, refusing a buffer of another observation or action space or another number of
+        envs (it would fail at the next stored transition with a bare broadcast error); the model's buffer is then
+        kept.
+
+        :param path: the pickled replay buffer
+        :param truncate_last_traj: see SB3 (``HerReplayBuffer`` only)
+        :raises ValueError: naming what differs
+        """
+        previous = getattr(self, "replay_buffer", None)
+        super().load_replay_buffer(path, truncate_last_traj)
+        buffer = self.replay_buffer
+        differences = [
+            f"{name} {got} (the model's: {want})"
+            for name, got, want in (
+                ("observation space", buffer.observation_space, self.observation_space),
+                ("action space", buffer.action_space, self.action_space),
+                ("number of envs", buffer.n_envs, self.n_envs if self.env is not None else buffer.n_envs),
+            )
+            if got != want
+        ]
+        if differences:
+            self.replay_buffer = previous
+            raise ValueError(f"the replay buffer {path} does not fit this model: {'; '.join(differences)}")
+
     @classmethod
     def load(cls, path: Any, env: GymEnv | None = None, device: Any = "auto", custom_objects: Any = None, **kwargs: Any):
         # settings given as keyword arguments replace the saved ones: the constructor's checks hold for them too

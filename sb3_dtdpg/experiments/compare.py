@@ -232,6 +232,17 @@ def _check_arguments(algos: Sequence[str], modes: Sequence[str], hyperparams: st
     check_seeds(seeds)
 
 
+def _check_planners_take(budget: Budget, env_id: str) -> None:
+    """:raises ValueError: the scenario has more robots than the reference planners take (before any run trains)"""
+    import gymnasium as gym
+
+    from noma_radiomap import load_scenario
+    from noma_radiomap.planners import check_planner_robots
+
+    scenario = budget.scenario or gym.spec(env_id).kwargs.get("scenario", "mall")
+    check_planner_robots(load_scenario(scenario).n_robots, f"compare's reference planners on {scenario}")
+
+
 def run_compare(
     out: str | Path = "results/compare",
     budget: str | Budget = "default",
@@ -275,6 +286,7 @@ def run_compare(
     algos, modes = list(dict.fromkeys(algos)), list(dict.fromkeys(modes))  # a name given twice is one run per seed
     seeds = budget.seeds if seeds is None else seeds
     _check_arguments(algos, modes, hyperparams, observation, seeds)
+    _check_planners_take(budget, env_id)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders

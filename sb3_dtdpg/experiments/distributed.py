@@ -7,43 +7,60 @@ shared output folder (``<out>/runs/<run_id>/result.json``, written last). Finish
 restarted worker resumes. ``sb3-dtdpg reproduce --report-only --out <out>`` (or ``compare`` again) then draws
 the tables from the gathered results.
 
-Usage, on every machine::
+Usage, on every machine (the options and defaults of ``sb3-dtdpg reproduce`` / ``compare``, so that the same
+options on the CLI later find the same runs)::
 
     python -m sb3_dtdpg.experiments.distributed reproduce --budget paper --out /shared/reproduce \\
         --storage postgresql://optuna@dbhost:5432/optuna --study-name reproduce-paper
 """
 
 import argparse
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.experiments.runs import RunSpec, get_budget, load_result, run_one
 
 
-def study_specs(job: str, budget: str = "paper", seeds: int | None = None, hyperparams: str = "paper") -> list[RunSpec]:
+def study_specs(
+    job: str,
+    budget: str = "paper",
+    seeds: int | None = None,
+    hyperparams: str = "tuned",
+    observation: str = "goal",
+    experiments: Sequence[str] | None = None,
+    multiple_access: Sequence[str] | None = None,
+) -> list[RunSpec]:
     """
     The runs of a job, in the order ``reproduce`` / ``compare`` run them (the same list on every machine).
 
-    :param job: ``"reproduce"`` or ``"compare"`` (with its default algorithms and modes)
+    :param job: ``"reproduce"`` or ``"compare"`` (with its default algorithms)
     :param budget: a budget name
     :param seeds: seeds per configuration (None: the budget's)
-    :param hyperparams: ``"paper"`` or ``"tuned"``
+    :param hyperparams: ``"tuned"`` (the CLI's default) or ``"paper"``
+    :param observation: ``"goal"``, ``"destinations"`` or ``"paper"``
+    :param experiments: ``reproduce`` only: the runs of these experiments (None: those ``sb3-dtdpg reproduce``
+        trains by default, all but ``paper_task_reality``)
+    :param multiple_access: the downlink modes (None: ``noma`` and ``oma``)
     :return: the unique runs
     """
     plan = get_budget(budget)
     seeds = plan.seeds if seeds is None else seeds
+    modes = list(dict.fromkeys(multiple_access or ("noma", "oma")))
     if job == "reproduce":
-        from sb3_dtdpg.experiments.reproduce import reproduce_specs
+        from sb3_dtdpg.experiments.reproduce import DEFAULT_EXPERIMENTS, reproduce_specs
 
-        experiments = reproduce_specs(plan, seeds, hyperparams)
-        unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
+        by_experiment = reproduce_specs(plan, seeds, hyperparams, observation)
+        chosen = [spec for name in (experiments or DEFAULT_EXPERIMENTS) for spec in by_experiment[name]]
+        unique = list({spec.run_id: spec for spec in chosen if spec.multiple_access in modes}.values())
         return sorted(unique, key=lambda spec: spec.seed)
+    if experiments is not None:
+        raise ValueError("experiments: only the reproduce job has experiments")
     if job == "compare":
         from sb3_dtdpg.baselines import DEFAULT_ENV_ID
         from sb3_dtdpg.experiments.compare import compare_specs
 
-        return compare_specs(plan, seeds, ["dtdpg", "ddpg"], ["noma", "oma"], DEFAULT_ENV_ID, hyperparams)
+        return compare_specs(plan, seeds, ["dtdpg", "ddpg"], modes, DEFAULT_ENV_ID, hyperparams, observation)
     raise ValueError(f"job must be 'reproduce' or 'compare', got {job!r}")
 
 
@@ -94,18 +111,70 @@ def run_study_worker(
     return done
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """:return: the worker's parser: per job, the options of ``sb3-dtdpg <job>`` that pick its runs, same defaults"""
+    from sb3_dtdpg import cli
+
+    parser = argparse.ArgumentParser(
+        prog="python -m sb3_dtdpg.experiments.distributed", description=__doc__.splitlines()[0], allow_abbrev=False
+    )
+    jobs = parser.add_subparsers(dest="job", required=True, metavar="{reproduce,compare}")
+    for job, budget in (("reproduce", "tiny"), ("compare", "default")):
+        p = jobs.add_parser(
+            job,
+            help=f"the runs of sb3-dtdpg {job}",
+            description=f"Take runs of sb3-dtdpg {job} from a shared Optuna study; the options and defaults are "
+            f"those of sb3-dtdpg {job}, so that it finds the same runs in --out.",
+            allow_abbrev=False,
+        )
+        p.set_defaults(error=p.error)
+        p.add_argument("--budget", type=cli._budget, default=budget, help=f"budget name (default: {budget}, as for the CLI)")
+        cli._add_seeds(p)  # --n-seeds (and the deprecated --seeds)
+        p.add_argument("--preset", choices=cli._PRESETS, default="tuned", help="hyperparameter set (default: tuned)")
+        p.add_argument(
+            "--hyperparams",
+            choices=cli._PRESETS,
+            dest="preset",
+            action=cli._DeprecatedOption,
+            replacement="--preset",
+            help=argparse.SUPPRESS,
+        )
+        p.add_argument("--observation", choices=cli._OBSERVATIONS, default="goal", help="observation (default: goal)")
+        p.add_argument(
+            "--multiple-access", nargs="+", choices=cli._MODES, default=None, help="downlink modes (default: noma oma)"
+        )
+        if job == "reproduce":
+            p.add_argument(
+                "--experiments",
+                nargs="+",
+                choices=cli._EXPERIMENTS,
+                default=None,
+                help="the runs of these experiments (default: all but paper_task_reality, as for the CLI)",
+            )
+        p.add_argument("--out", type=cli._output_folder, required=True, help="the output folder shared by the workers")
+        p.add_argument("--storage", required=True, help="Optuna storage URL, or a .log path (JournalFile)")
+        p.add_argument("--study-name", required=True)
+    return parser
+
+
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("job", choices=("reproduce", "compare"))
-    parser.add_argument("--budget", default=None, help="budget name (default: paper for reproduce, default for compare)")
-    parser.add_argument("--seeds", type=int, default=None)
-    parser.add_argument("--hyperparams", default="paper")
-    parser.add_argument("--out", required=True, help="the output folder shared by the workers")
-    parser.add_argument("--storage", required=True, help="Optuna storage URL, or a .log path (JournalFile)")
-    parser.add_argument("--study-name", required=True)
-    args = parser.parse_args(argv)
-    budget = args.budget or ("paper" if args.job == "reproduce" else "default")
-    specs = study_specs(args.job, budget, args.seeds, args.hyperparams)
+    from sb3_dtdpg.experiments.runs import check_budget
+
+    args = build_parser().parse_args(argv)
+    try:
+        specs = study_specs(
+            args.job,
+            args.budget,
+            args.n_seeds,
+            args.preset,
+            args.observation,
+            getattr(args, "experiments", None),
+            args.multiple_access,
+        )
+        for spec in specs:
+            check_budget(spec)
+    except ValueError as error:
+        args.error(str(error))
     done = run_study_worker(specs, args.out, args.storage, args.study_name)
     print(f"{len(done)} runs of {len(specs)} done by this worker")
 

@@ -20,6 +20,7 @@ their public names are importable from here too.
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import shutil
 import time
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from sb3_dtdpg.common.files import atomic_write, remove_temp_files, write_json
+from sb3_dtdpg.common.files import atomic_write, json_default, remove_temp_files, write_json
 from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS, Budget, check_budget, get_budget
 from sb3_dtdpg.experiments.pool import RunReport, RunsFailedError, run_in_pool, worker_pool
 from sb3_dtdpg.experiments.run_callbacks import (
@@ -49,6 +50,7 @@ from sb3_dtdpg.experiments.specs import (
     run_identity,
 )
 from sb3_dtdpg.experiments.storage import (
+    DamagedRecordError,
     OutputBusyError,
     clear_checkpoints,
     failure_path,
@@ -69,6 +71,7 @@ __all__ = [
     "PUBLIC_BUDGETS",
     "RUN_FORMAT_VERSION",
     "Budget",
+    "DamagedRecordError",
     "EpisodeCounter",
     "EpisodeReturnLogger",
     "OutputBusyError",
@@ -117,22 +120,88 @@ def _evaluation_record(result: Any, n_trajectories: int, reward_phase: str) -> d
     }
 
 
-def _build_model(spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None, verbose: int) -> tuple[Any, Any, int]:
-    """:return: the training env, the model (new, or loaded from the checkpoint) and the episodes already trained"""
+#: The settings of a checkpoint's model that must be the run's (:func:`run_identity`'s ``hyperparameters``, where it
+#: records them) to resume from it: the ones that tell the algorithms apart (the policy class; DDPG and TD3 share
+#: one) and that training leaves as they are (not the action noise, which DT-DPG's curriculum re-arms).
+_CHECKPOINT_SETTINGS: tuple[str, ...] = (
+    "policy_class",
+    "buffer_size",
+    "batch_size",
+    "gamma",
+    "tau",
+    "policy_delay",
+    "target_policy_noise",
+    "target_noise_clip",
+    "policy.net_arch",
+)
+
+
+def _check_checkpoint_model(model: Any, checkpoint: dict[str, Any], identity: dict[str, Any], pointer: Path) -> None:
+    """
+    A checkpoint's model must be the one its record was written with: of the run's algorithm and settings
+    (:data:`_CHECKPOINT_SETTINGS`) and at the step count the record names (``timesteps``). A model replaced from
+    outside (another algorithm's, another run's) would otherwise be trained on and reported as this run's.
+
+    :param model: the model loaded from the checkpoint
+    :param checkpoint: the checkpoint record (:func:`read_checkpoint`)
+    :param identity: the run's :func:`run_identity`
+    :param pointer: the record's file, for the message
+    :raises DamagedRecordError: naming the checkpoint, the differences and the record to delete
+    """
+    from sb3_dtdpg.presets import model_settings
+
+    stored = json.loads(json.dumps(model_settings(model), default=json_default))
+    expected = identity.get("hyperparameters", {})
+    differences = [
+        f"{name}: {stored[name]!r} in the model, {expected[name]!r} in the run"
+        for name in _CHECKPOINT_SETTINGS
+        if name in stored and name in expected and stored[name] != expected[name]
+    ]
+    if int(model.num_timesteps) != checkpoint["timesteps"]:
+        differences.append(f"num_timesteps: {model.num_timesteps} in the model, {checkpoint['timesteps']} in {pointer}")
+    if differences:
+        raise DamagedRecordError(
+            f"the checkpoint in {checkpoint['path']} is not this run's ({'; '.join(differences)[:400]}): its "
+            f"model.zip was replaced from outside; delete {pointer} to start the run afresh"
+        )
+
+
+def _build_model(
+    spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None, identity: dict[str, Any], verbose: int
+) -> tuple[Any, Any, int]:
+    """
+    :return: the training env, the model (new, or loaded from the checkpoint) and the episodes already trained
+    :raises DamagedRecordError: the checkpoint cannot be loaded, has no replay buffer, or its model is not the one
+        its record was written with (:func:`_check_checkpoint_model`)
+    """
+    from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+
     from sb3_dtdpg.baselines import algorithm_class, make_env
 
     env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
     if checkpoint is not None:
+        pointer, buffer = run_dir / "checkpoint.json", checkpoint["path"] / "replay_buffer.pkl"
         try:
-            model = algorithm_class(spec.algo).load(checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose)
-            if (checkpoint["path"] / "replay_buffer.pkl").exists():
-                model.load_replay_buffer(checkpoint["path"] / "replay_buffer.pkl")
-        except Exception as error:  # written atomically: damaged from outside
+            try:
+                model = algorithm_class(spec.algo).load(
+                    checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose
+                )
+                if buffer.exists():
+                    model.load_replay_buffer(buffer)
+            except Exception as error:  # written atomically: damaged from outside
+                raise DamagedRecordError(
+                    f"the checkpoint in {checkpoint['path']} cannot be loaded ({type(error).__name__}: "
+                    f"{str(error)[:200]}); delete {pointer} to start the run afresh"
+                ) from error
+            if isinstance(model, OffPolicyAlgorithm) and not buffer.exists():  # saved with every off-policy model
+                raise DamagedRecordError(
+                    f"the checkpoint in {checkpoint['path']} has no replay_buffer.pkl (removed from outside?); "
+                    f"delete {pointer} to start the run afresh"
+                )
+            _check_checkpoint_model(model, checkpoint, identity, pointer)
+        except DamagedRecordError:
             env.close()
-            raise ValueError(
-                f"the checkpoint in {checkpoint['path']} cannot be loaded ({type(error).__name__}: {str(error)[:200]}); "
-                f"delete {run_dir / 'checkpoint.json'} to start the run afresh"
-            ) from error
+            raise
         return env, model, int(checkpoint["episodes"])
     model = build_model(spec, env, verbose=verbose, **({"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}))
     return env, model, 0
@@ -278,6 +347,9 @@ def run_one(
         folder holds another run's logs
     :raises OutputBusyError: another process trains into the run's TensorBoard folder
     :raises RunDivergedError: training diverged (``failed.json`` records it; the checkpoints are removed)
+    :raises DamagedRecordError: with ``resume``, the result or checkpoint record is damaged, or the checkpoint it
+        names is missing, cannot be loaded or is not this run's (another algorithm's or run's model): changed from
+        outside; the message names what to delete, and nothing is removed
     :raises ValueError: when the budget cannot train (:func:`prepare_run`)
     """
     import torch as th
@@ -297,8 +369,10 @@ def run_one(
         checkpoint = read_checkpoint(run_dir, identity)
     tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
     with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):
-        if checkpoint is None:
-            shutil.rmtree(run_dir, ignore_errors=True)  # leftovers of an interrupted attempt: start afresh
+        if checkpoint is None:  # leftovers of an interrupted attempt: start afresh
+            if run_dir.is_dir():
+                clear_checkpoints(run_dir)  # the checkpoint record first: a kill here leaves none naming a removed folder
+            shutil.rmtree(run_dir, ignore_errors=True)
         remove_temp_files(run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
         return _train_and_record(
@@ -321,7 +395,8 @@ def _train_and_record(
     from stable_baselines3.common.logger import configure
 
     run_dir = run_folder(out, spec)
-    env, model, done_episodes = _build_model(spec, run_dir, checkpoint, verbose)
+    env, model, done_episodes = _build_model(spec, run_dir, checkpoint, identity, verbose)
+    start_timesteps = int(model.num_timesteps) if checkpoint is not None else 0  # learn() resets a new model's count
     # A logger of our own, so that the TensorBoard folder is exactly tb/<run_id> (SB3 would append "_1").
     model.set_logger(configure(str(tb_dir), ["tensorboard", "csv", *(["stdout"] if verbose else [])]))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
@@ -347,8 +422,9 @@ def _train_and_record(
             "timesteps": int(model.num_timesteps),
             "episodes": int(counter.n_episodes),
             "resumed_at_episode": done_episodes if checkpoint is not None else None,
-            "wall_s": train_s,
-            "steps_per_s": model.num_timesteps / max(train_s, 1e-9),
+            "wall_s": train_s,  # of this process's training (a resumed run: of its resumed part)
+            # the steps trained in this process over wall_s (a resumed run: not the steps before its checkpoint)
+            "steps_per_s": (model.num_timesteps - start_timesteps) / max(train_s, 1e-9),
         },
         "reward_phases": {"trained": trained_on, "evaluated": final_reward_phase},
         **_evaluations(spec, model, run_dir, trained_on, final_reward_phase, n_trajectories),

@@ -14,13 +14,30 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sb3_dtdpg.common.files import json_default
+from sb3_dtdpg.common.files import json_default, safe_name
 
 __all__ = ["RUN_FORMAT_VERSION", "RunDivergedError", "RunMismatchError", "RunSpec", "check_identity", "run_identity"]
 
 #: Version of what a run is and what its result file holds; results of another version are not reused.
 #: 3: the hyperparameters are read back from the built model (:func:`sb3_dtdpg.presets.model_settings`).
 RUN_FORMAT_VERSION = 3
+
+
+#: The integer fields of a :class:`RunSpec`: (name, smallest value, None allowed)
+_COUNTS = (
+    ("seed", 0, False),
+    ("episodes", 1, False),
+    ("timesteps", 1, True),
+    ("destination_episodes", 1, True),
+    ("eval_episodes", 1, False),
+    ("eval_seed", 0, False),
+)
+_MAX_SEED = 2**32 - 1  # numpy's and torch's seed range; far above any budget
+_CHANNELS = ("radio_map", "rayleigh")
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 @dataclass(frozen=True)
@@ -78,6 +95,19 @@ class RunSpec:
     observation: str = "goal"
     overrides: tuple[tuple[str, str], ...] = ()
     power_mapping: str = "paper"
+
+    def __post_init__(self) -> None:
+        """:raises ValueError: naming the first field that no run can have (before anything is trained)"""
+        for name, low, optional in _COUNTS:
+            value = getattr(self, name)
+            if (value is not None or not optional) and not (_is_int(value) and low <= value <= _MAX_SEED):
+                what = f"an integer from {low:,} to {_MAX_SEED:,}" + (" or None" if optional else "")
+                raise ValueError(f"RunSpec.{name}: expected {what}, got {value!r}")
+        for name in ("channel", "eval_channel"):
+            if getattr(self, name) not in _CHANNELS:
+                raise ValueError(f"RunSpec.{name}: expected one of {_CHANNELS}, got {getattr(self, name)!r}")
+        if not isinstance(self.tag, str) or (self.tag and safe_name(self.tag) != self.tag):
+            raise ValueError(f"RunSpec.tag: expected letters, digits and ._+- (part of a folder name), got {self.tag!r}")
 
     @property
     def _suffix(self) -> str:
@@ -154,9 +184,11 @@ def _hyperparameters(spec: RunSpec) -> dict[str, Any]:
     The settings the run trains with, read back from the model built for it (:func:`build_model`,
     :func:`sb3_dtdpg.presets.model_settings`), never re-derived from the presets.
     """
-    from sb3_dtdpg.baselines import make_env
+    from sb3_dtdpg.baselines import algorithm_class, make_env
+    from sb3_dtdpg.overrides import check_constructor_kwargs
     from sb3_dtdpg.presets import model_settings
 
+    check_constructor_kwargs(algorithm_class(spec.algo), spec.override_kwargs, " (RunSpec.overrides)")
     env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
     try:
         return model_settings(build_model(spec, env))

@@ -22,6 +22,7 @@ from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identit
 __all__ = [
     "FOLDER_LOCK",
     "TENSORBOARD_OWNER",
+    "DamagedRecordError",
     "OutputBusyError",
     "clear_checkpoints",
     "failure_path",
@@ -40,6 +41,14 @@ __all__ = [
 
 class OutputBusyError(RuntimeError):
     """Another process holds the output folder's lock."""
+
+
+class DamagedRecordError(ValueError):
+    """
+    A run's record (``result.json``, ``checkpoint.json``) or the checkpoint it names is damaged, missing or not this
+    run's. The harness writes each of them whole (atomically, a checkpoint's files before its record), so this
+    means a change from outside. The message names the file and what to delete; nothing is removed for the user.
+    """
 
 
 def run_folder(out: str | Path, spec: RunSpec) -> Path:
@@ -61,7 +70,7 @@ def _read_record(path: Path) -> dict[str, Any]:
     """
     :param path: a result or checkpoint record (written atomically: unreadable only when damaged from outside)
     :return: its content
-    :raises ValueError: naming the file and the fix when it is not a JSON mapping
+    :raises DamagedRecordError: naming the file and the fix when it is not a JSON mapping
     """
     try:
         record = json.loads(path.read_text())
@@ -69,7 +78,7 @@ def _read_record(path: Path) -> dict[str, Any]:
         record = error
     if not isinstance(record, dict):
         reason = f"{type(record).__name__}: {record}" if isinstance(record, Exception) else "not a JSON mapping"
-        raise ValueError(f"{path} is unreadable ({str(reason)[:200]}); delete {path.parent} to run this run again")
+        raise DamagedRecordError(f"{path} is unreadable ({str(reason)[:200]}); delete {path.parent} to run this run again")
     return record
 
 
@@ -82,7 +91,7 @@ def load_result(out: str | Path, spec: RunSpec, identity: dict[str, Any] | None 
     :param identity: the run's :func:`run_identity` (None: computed here)
     :return: the result, or None when the run has not finished
     :raises RunMismatchError: the stored result is another run's (another budget, scenario, hyperparameters ...)
-    :raises ValueError: the result file is damaged
+    :raises DamagedRecordError: the result file is damaged
     """
     path = result_path(out, spec)
     if not path.exists():
@@ -279,11 +288,16 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
     """
     The latest checkpoint of a run, checked against the run's identity.
 
+    :func:`save_checkpoint` writes ``checkpoint.json`` after the checkpoint's files, and :func:`clear_checkpoints`
+    removes it before them, so a record whose ``model.zip`` is missing was changed from outside: an error, never a
+    silent fresh start (which would delete the run's folder). Checkpoint folders that the record does not name (a
+    kill while one was written) are no error: the next checkpoint, or the run's end, removes them.
+
     :param run_dir: the run's folder
     :param identity: the run's :func:`run_identity` (None: not checked)
-    :return: ``checkpoint.json``'s content plus ``path`` (the folder), or None when there is none
+    :return: ``checkpoint.json``'s content plus ``path`` (the folder), or None when there is no ``checkpoint.json``
     :raises RunMismatchError: the checkpoint is another run's
-    :raises ValueError: the checkpoint record is damaged
+    :raises DamagedRecordError: the checkpoint record is damaged, or the checkpoint it names has no ``model.zip``
     """
     run_dir = Path(run_dir)
     pointer = run_dir / "checkpoint.json"
@@ -292,8 +306,26 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
     checkpoint = _read_record(pointer)
     if identity is not None:
         check_identity(checkpoint, identity, pointer)
-    checkpoint["path"] = run_dir / checkpoint["folder"]
-    return checkpoint if (checkpoint["path"] / "model.zip").exists() else None
+    folder = checkpoint.get("folder")
+    counts = [checkpoint.get(name) for name in ("episodes", "timesteps")]
+    if (
+        not isinstance(folder, str)
+        or len(Path(folder).parts) != 2
+        or Path(folder).parts[0] != "checkpoints"
+        or Path(folder).name in ("..", ".")
+        or not all(isinstance(count, int) and not isinstance(count, bool) and count >= 0 for count in counts)
+    ):
+        raise DamagedRecordError(
+            f"{pointer} is not a checkpoint record (folder {str(folder)[:80]!r}, episodes and timesteps "
+            f"{str(counts)[:80]}); delete {pointer} to start the run afresh"
+        )
+    checkpoint["path"] = run_dir / folder
+    if not (checkpoint["path"] / "model.zip").is_file():
+        raise DamagedRecordError(
+            f"{pointer} names the checkpoint {checkpoint['path']}, which has no model.zip (removed from outside?); "
+            f"delete {pointer} to start the run afresh"
+        )
+    return checkpoint
 
 
 def failure_path(out: str | Path, spec: RunSpec) -> Path:
@@ -302,7 +334,10 @@ def failure_path(out: str | Path, spec: RunSpec) -> Path:
 
 
 def clear_checkpoints(run_dir: Path) -> None:
-    """Remove a finished run's checkpoints and progress record (its result supersedes them; a replay buffer can be large)."""
+    """
+    Remove a finished run's checkpoints and progress record (its result supersedes them; a replay buffer can be large).
+    The checkpoint record goes first, so that a kill part way never leaves a record naming a removed checkpoint.
+    """
     (run_dir / "checkpoint.json").unlink(missing_ok=True)
     (run_dir / "progress.json").unlink(missing_ok=True)
     shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)
