@@ -282,3 +282,14 @@ def test_reproduce_reports_one_experiment_in_one_mode(tmp_path):
     assert (paired["mqi"] == 10.0).all() and (paired["n"] == 2).all()
     text = (tmp_path / "paired.md").read_text()
     assert "| radio map E - reality E | DT-DPG | NOMA | - |" in text
+
+
+def test_the_transfer_dip_counts_the_seeds_whose_log_was_read(tmp_path):
+    # a run without a readable TensorBoard log gives no dip: n said 2 while the mean came from fewer seeds
+    from sb3_dtdpg.experiments.reproduce import _dip_table
+
+    experiments = reproduce_specs(MICRO, seeds=2)
+    results = {spec.run_id: {"finished": True} for spec in experiments["learning_rates"]}
+    dip = _dip_table(tmp_path, experiments, results)
+    assert (dip["n"] == 0).all() and dip["final"].isna().all()
+    assert (tmp_path / "transfer_dip.csv").exists()

@@ -220,3 +220,21 @@ def test_the_exhaustive_planners_refuse_more_robots_than_they_can_search(tmp_pat
     with pytest.raises(ValueError, match=r"compare's reference planners on .*crowd\.yaml: the scenario has 7 robots"):
         run_compare(tmp_path / "out", budget="tiny", scenario=str(path))  # before any run trains
     assert not (tmp_path / "out").exists()
+
+
+def test_the_grid_planners_refuse_motion_steps_far_shorter_than_a_cell(tmp_path):
+    # time_step 1e-6 with v_max 100 (a valid room): each chord check took millions of motion steps, a hang
+    import yaml
+
+    from noma_radiomap.planners import MAX_CELL_STEPS
+
+    data = noma_radiomap.load_scenario("small").to_dict()
+    data["robot"]["v_max"] = 1.0
+    data["mission"]["time_step"] = 0.5 / MAX_CELL_STEPS / 2  # half a thousandth of the 0.5 m cell per step
+    path = tmp_path / "slow.yaml"
+    path.write_text(yaml.safe_dump(data))
+    env = gym.make("NomaRadioMap-v0", scenario=str(path))
+    env.reset(seed=0)
+    for planner in (ShortestPathPlanner(), CommAwarePlanner(), ReferencePlanner()):
+        with pytest.raises(ValueError, match=r"moves at most 0\.00025 m per step .*less than 1/1,000 of a cell"):
+            planner.reset(env.unwrapped)

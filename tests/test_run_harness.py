@@ -452,3 +452,14 @@ def test_no_lock_file_stays_behind_and_a_shared_lock_outlives_its_first_holder(t
     assert sorted(p.name for p in tmp_path.iterdir()) == []
     with output_lock(tmp_path):  # and the folder is free again
         pass
+
+
+def test_the_last_training_episode_is_in_the_logs(tmp_path):
+    # the episode budget stops training inside SB3's rollout, before SB3 wrote the last episode's values: the logs
+    # (curves, training success, the transfer dip) held one episode fewer than the run trained
+    from sb3_dtdpg.experiments.plots import read_scalars
+
+    result = run_one(SPEC, tmp_path)
+    scalars = read_scalars(tmp_path / "tb" / SPEC.run_id)
+    assert scalars["episode/number"].max() == result["train"]["episodes"] == SPEC.episodes
+    assert scalars.index.max() == result["train"]["timesteps"]

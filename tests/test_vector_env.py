@@ -458,3 +458,17 @@ def test_study_worker_takes_the_cli_options_and_defaults(monkeypatch, capsys):
     distributed.main(["compare", "--budget", "tiny", "--seeds", "1", "--hyperparams", "paper", *storage])
     assert [s.run_id for s in taken.pop("ids")] == [s.run_id for s in compare_specs(BUDGETS["tiny"], 1, hyperparams="paper")]
     assert "--seeds is deprecated, use --n-seeds" in capsys.readouterr().err
+
+
+def test_a_study_worker_meeting_another_runs_result_says_so_in_one_line(monkeypatch, capsys):
+    from sb3_dtdpg.experiments import distributed
+    from sb3_dtdpg.experiments.runs import RunMismatchError
+
+    def worker(specs, *args):
+        raise RunMismatchError("runs/ddpg_noma_s0_tuned_goal/result.json belongs to another run with the same id")
+
+    monkeypatch.setattr(distributed, "run_study_worker", worker)
+    with pytest.raises(SystemExit) as exit_info:
+        distributed.main(["compare", "--budget", "tiny", "--out", "out", "--storage", "s.log", "--study-name", "job"])
+    errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
+    assert exit_info.value.code == 2 and len(errors) == 1 and "belongs to another run with the same id" in errors[0]

@@ -38,6 +38,7 @@ from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import dbm_to_watt
 
 __all__ = [
+    "MAX_CELL_STEPS",
     "MAX_PLANNER_ROBOTS",
     "CommAwarePlanner",
     "GridPlanner",
@@ -99,6 +100,11 @@ def _env_state(env: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 #: the comm-aware planner a grid of power levels (3^U and more) and the best planner every combination of the robots'
 #: candidate paths (5^U): 6 robots take seconds per mission, 7 minutes, 200 more memory than a machine has.
 MAX_PLANNER_ROBOTS = 6
+
+
+#: The grid planners check each straight move of a robot one motion step at a time: a step shorter than this
+#: fraction of a cell (``time_step: 1e-6`` with ``v_max: 100``) would make each check millions of steps.
+MAX_CELL_STEPS = 1_000
 
 
 def check_planner_robots(n_robots: int, planner: str) -> None:
@@ -183,11 +189,14 @@ class GridPlanner:
             self._extra = extra
             self._cost = 1.0 + (np.zeros(env.radio_map.blocked.shape) if extra is None else extra)
             room = env.scenario.room
-            self._motion = GridMotion(
-                env.radio_map.blocked,
-                room,
-                max_step=env.scenario.robot.v_max * env.scenario.mission.time_step,
-            )
+            max_step = env.scenario.robot.v_max * env.scenario.mission.time_step
+            if room.resolution > MAX_CELL_STEPS * max_step:
+                raise ValueError(
+                    f"{type(self).__name__}: a robot moves at most {max_step:g} m per step (robot.v_max x "
+                    f"mission.time_step), less than 1/{MAX_CELL_STEPS:,} of a cell ({room.resolution:g} m); the grid "
+                    "planners check their moves step by step and would take hours per mission"
+                )
+            self._motion = GridMotion(env.radio_map.blocked, room, max_step=max_step)
 
     def _field(self, env: Any, destination: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = (float(destination[0]), float(destination[1]))

@@ -158,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from sb3_dtdpg.experiments.runs import check_budget
+    from sb3_dtdpg.experiments.runs import DamagedRecordError, RunDivergedError, RunMismatchError, check_budget
 
     args = build_parser().parse_args(argv)
     try:
@@ -175,7 +175,10 @@ def main(argv: list[str] | None = None) -> None:
             check_budget(spec)
     except ValueError as error:
         args.error(str(error))
-    done = run_study_worker(specs, args.out, args.storage, args.study_name)
+    try:
+        done = run_study_worker(specs, args.out, args.storage, args.study_name)
+    except (RunMismatchError, RunDivergedError, DamagedRecordError) as error:  # what the CLI reports as one line
+        args.error(str(error))
     print(f"{len(done)} runs of {len(specs)} done by this worker")
 
 

@@ -231,7 +231,7 @@ def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[s
         return None
     rows = []
     for group, part in pd.DataFrame(dips).groupby("group", sort=False):
-        row: dict[str, Any] = {"group": group, "n": len(part)}
+        row: dict[str, Any] = {"group": group, "n": int(part["final"].notna().sum())}  # seeds whose log was read
         for key in ("transfer_episode", "before", "after", "final"):
             row[key], row[f"{key}_ci"] = mean_ci(part[key].dropna().to_numpy())
         rows.append(row)

@@ -59,6 +59,12 @@ class EpisodeReturnLogger(EpisodeCounter):
             self.logger.record("episode/number", number)
         return continue_training
 
+    def _on_training_end(self) -> None:
+        # A run stopped by its episode budget ends inside SB3's rollout, before SB3 writes the last episode's
+        # values: write what is pending, so the last episode is in the logs (progress.csv, TensorBoard) too.
+        if self.logger.name_to_value:
+            self.logger.dump(self.num_timesteps)
+
 
 class RunProgress(BaseCallback):
     """
