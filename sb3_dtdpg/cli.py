@@ -52,7 +52,7 @@ _OVERRIDES_HELP = (
     "policy_kwargs:'dict(net_arch=[64, 64])'); values are Python literals"
 )
 _MODES = ("noma", "oma")
-#: Seeds go to numpy and torch, which take 0 <= seed < 2**32.
+#: Seeds go to numpy and torch, which take 0 <= seed < 2**32 (sb3_dtdpg.experiments.specs._MAX_SEED).
 _MAX_SEED = 2**32 - 1
 _OBSERVATION_HELP = (
     "goal: each robot's position, destination, channel gain and arrived flag plus its direction and distance to "

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.env_settings import CHECKED, check_settings
+from sb3_dtdpg.experiments.storage import RUN_RECORDS
 
 __all__ = ["RUN_RECORDS", "SavedModel", "check_output_file", "read_saved_model"]
 
@@ -21,17 +22,6 @@ __all__ = ["RUN_RECORDS", "SavedModel", "check_output_file", "read_saved_model"]
 _POLICY_ALGOS = {"DTDPGPolicy": "dtdpg", "TD3Policy": "td3", "SACPolicy": "sac", "TQCPolicy": "tqc"}
 #: The algorithms whose models have a policy class: SB3's DDPG is TD3 with other settings, so it has TD3's policy.
 _POLICY_FAMILIES = {"DTDPGPolicy": ("dtdpg",), "TD3Policy": ("td3", "ddpg"), "SACPolicy": ("sac",), "TQCPolicy": ("tqc",)}
-#: The files a run of ``train``/``compare``/``reproduce`` owns in its folder ``<out>/runs/<run id>/``
-#: (:mod:`sb3_dtdpg.experiments.storage`, :func:`sb3_dtdpg.experiments.runs.run_one`), besides the curriculum's
-#: ``phase_<k>_<name>.zip`` and the ``checkpoints/`` folder.
-RUN_RECORDS: tuple[str, ...] = (
-    "result.json",
-    "progress.json",
-    "checkpoint.json",
-    "failed.json",
-    "model.zip",
-    "replay_buffer.pkl",
-)
 #: The fields of a run record's ``spec`` that :func:`read_saved_model` reads (each a string, or null).
 _SPEC_FIELDS = ("algo", "scenario", "observation", "multiple_access", "channel", "task", "env_id")
 

@@ -56,8 +56,8 @@ def _checked_manager(base: type) -> type:
             """Build the env once with the run's env_kwargs: a bad one is an error line before the log folder exists."""
             import gymnasium as gym
 
-            eval_kwargs = self.eval_env_kwargs or {}
-            for kwargs in [self.env_kwargs or {}] + ([eval_kwargs] if eval_kwargs != (self.env_kwargs or {}) else []):
+            env_kwargs, eval_kwargs = self.env_kwargs or {}, self.eval_env_kwargs or {}
+            for kwargs in (env_kwargs, eval_kwargs) if eval_kwargs != env_kwargs else (env_kwargs,):
                 try:
                     gym.make(self.env_name.gym_id, **kwargs).close()
                 except (ValueError, TypeError) as error:

@@ -8,7 +8,7 @@ import numpy as np
 from noma_radiomap import geometry
 from noma_radiomap.motion import GridMotion
 from noma_radiomap.radiomap import RadioMap
-from noma_radiomap.scenario import Scenario
+from noma_radiomap.scenario import Scenario, starts_away_from
 
 __all__ = ["MissionSampler"]
 
@@ -42,14 +42,8 @@ class MissionSampler:
             centres = (radio_map.start_cells(u) + 0.5) * sc.room.resolution
             choices = []
             for destination in robot.destinations[:1] if self.fixed_destinations else robot.destinations:
-                goal = np.asarray(destination, dtype=np.float64)
-                far = np.hypot(*(centres - goal).T) > sc.robot.arrival_radius
-                if not far.any():
-                    raise ValueError(
-                        f"robots[{u}].start: every free cell of {list(robot.start)} is within arrival_radius of "
-                        f"destination {list(destination)}"
-                    )
-                choices.append((goal, centres[far]))
+                far = starts_away_from(centres, destination, sc.robot.arrival_radius, u, robot.start)
+                choices.append((np.asarray(destination, dtype=np.float64), centres[far]))
             missions.append(choices)
         return missions
 

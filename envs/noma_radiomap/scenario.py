@@ -657,22 +657,31 @@ def _check_layout(scenario: Scenario) -> None:
                 raise ValueError(
                     f"{path}: {list(destination)} is unreachable from robots[{u}].start region {list(robot.start)}"
                 )
-            _check_arrival_radius(centres, destination, scenario.robot.arrival_radius, u, robot.start)
+            starts_away_from(centres, destination, scenario.robot.arrival_radius, u, robot.start)
 
 
-def _check_arrival_radius(
+def starts_away_from(
     centres: np.ndarray, destination: Vec2, arrival_radius: float, u: int, start: tuple[float, ...]
-) -> None:
+) -> np.ndarray:
     """
-    :raises ValueError: every start point ``centres`` of robot ``u`` is within ``arrival_radius`` of ``destination``
-        (the robot would start arrived), with the message the env's mission sampler gives
-        (:class:`noma_radiomap.sampling.MissionSampler`)
+    The start points of robot ``u`` farther than ``arrival_radius`` from one of its destinations (a robot never
+    starts arrived); checked when a scenario is loaded and used by the env's mission sampler
+    (:class:`noma_radiomap.sampling.MissionSampler`).
+
+    :param centres: the centres of the free cells of its start region, (k, 2)
+    :param destination: the destination
+    :param arrival_radius: ``robot.arrival_radius``
+    :param u: the robot's index, for the message
+    :param start: its start region, for the message
+    :return: the mask of ``centres`` far enough
+    :raises ValueError: none is
     """
-    goal = np.asarray(destination, dtype=np.float64)
-    if not (np.hypot(*(centres - goal).T) > arrival_radius).any():
+    far = np.hypot(*(centres - np.asarray(destination, dtype=np.float64)).T) > arrival_radius
+    if not far.any():
         raise ValueError(
             f"robots[{u}].start: every free cell of {list(start)} is within arrival_radius of destination {list(destination)}"
         )
+    return far
 
 
 def _parse_scenario(data: Any, source: str | None) -> Scenario:

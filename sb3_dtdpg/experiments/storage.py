@@ -21,6 +21,7 @@ from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identit
 
 __all__ = [
     "FOLDER_LOCK",
+    "RUN_RECORDS",
     "TENSORBOARD_OWNER",
     "DamagedRecordError",
     "OutputBusyError",
@@ -37,6 +38,19 @@ __all__ = [
     "tensorboard_claim",
     "tensorboard_folder",
 ]
+
+
+#: The files a run of ``train``/``compare``/``reproduce`` owns in its folder ``<out>/runs/<run id>/`` (written here
+#: and by :func:`sb3_dtdpg.experiments.runs.run_one`), besides the curriculum's ``phase_<k>_<name>.zip`` and the
+#: ``checkpoints/`` folder
+RUN_RECORDS: tuple[str, ...] = (
+    "result.json",
+    "progress.json",
+    "checkpoint.json",
+    "failed.json",
+    "model.zip",
+    "replay_buffer.pkl",
+)
 
 
 class OutputBusyError(RuntimeError):
