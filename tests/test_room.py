@@ -45,14 +45,18 @@ def best_planner():
 
 
 @pytest.fixture(scope="module")
-def scores(test_missions, best_planner):
+def shortest_path_planner():
+    return ShortestPathPlanner(**PLANNERS[SHORTEST_PATH_PLANNER][1])
+
+
+@pytest.fixture(scope="module")
+def scores(test_missions, best_planner, shortest_path_planner):
     out = {}
     for channel in ("radio_map", "rayleigh"):
         for mode in ("noma", "oma"):
             env = gym.make("NomaRadioMap-v0", channel=channel, multiple_access=mode)
             out[channel, mode, BEST_PLANNER] = evaluate(best_planner, env, **test_missions)
-            kwargs = PLANNERS[SHORTEST_PATH_PLANNER][1]
-            out[channel, mode, SHORTEST_PATH_PLANNER] = evaluate(ShortestPathPlanner(**kwargs), env, **test_missions)
+            out[channel, mode, SHORTEST_PATH_PLANNER] = evaluate(shortest_path_planner, env, **test_missions)
     return out
 
 
@@ -138,7 +142,7 @@ def test_no_robot_arrives_sooner_than_its_shortest_path_allows(scores):
     assert tight == 40  # within one step of every robot of the shortest-path planner
 
 
-def test_the_compare_table_prints_the_margins_of_the_default_room(scores):
+def test_the_compare_table_prints_the_margins_of_the_default_room(scores, best_planner, shortest_path_planner):
     # The line under `sb3-dtdpg compare`'s table: the radio-map margins from its own planner runs, the Rayleigh ones
     # from the table's rows (here: this module's evaluations of the same planners on the same missions).
     rows = [
@@ -146,7 +150,8 @@ def test_the_compare_table_prints_the_margins_of_the_default_room(scores):
         for mode in ("noma", "oma")
         for name in (BEST_PLANNER, SHORTEST_PATH_PLANNER)
     ]
-    margins = room_margins(rows, get_budget("default"))
+    instances = {BEST_PLANNER: best_planner, SHORTEST_PATH_PLANNER: shortest_path_planner}  # their rollouts cached
+    margins = room_margins(rows, get_budget("default"), instances=instances)
     mqi = {key: result.mqi_mean for key, result in scores.items()}
     for channel in ("radio_map", "rayleigh"):
         best = mqi[channel, "noma", BEST_PLANNER]

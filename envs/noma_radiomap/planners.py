@@ -247,12 +247,15 @@ class GridPlanner:
         points, cost_to_go = self._paths[u]
         costs, _ = self._fields[(float(points[-1][0]), float(points[-1][1]))]
         here = float(costs[tuple(int(i) for i in env.radio_map.cell_index(position))])
+        # The farthest point within the lookahead reached by a clear chord no costlier than the path: searched from
+        # the far end, as most chords are clear. Half a cell of slack: ``position`` is anywhere in its cell, the costs
+        # are at cell centres.
+        slack = 0.5 * env.scenario.room.resolution
         best = 0
-        for j in range(min(self.lookahead, len(points))):
-            # Half a cell of slack: ``position`` is anywhere in its cell, the costs are at cell centres.
-            slack = 0.5 * env.scenario.room.resolution
+        for j in range(min(self.lookahead, len(points)) - 1, 0, -1):
             if self._clear(position, points[j]) and self._chord_cost(env, position, points[j]) <= here - cost_to_go[j] + slack:
                 best = j
+                break
         # Points before the one aimed at are behind the robot now.
         self._paths[u] = (points[best:], cost_to_go[best:])
         target = points[best]
