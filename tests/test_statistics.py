@@ -31,6 +31,17 @@ def test_the_bootstrap_is_seeded_and_the_cis_contain_the_statistic():
     assert aggregate.stratified_bootstrap_ci(scores, seed=3) == aggregate.stratified_bootstrap_ci(scores, seed=3)
     low, high = aggregate.stratified_bootstrap_ci(scores)
     assert low <= aggregate.iqm(scores) <= high
+    with_nan = np.array([np.nan, *scores])  # NaNs are dropped in every resample
+    low, high = aggregate.stratified_bootstrap_ci(with_nan)
+    assert low <= aggregate.iqm(scores) <= high and not math.isnan(low)
+
+
+@pytest.mark.parametrize("shape", [(20,), (5, 3), (2,), (7, 4)])
+def test_the_iqm_ci_of_all_resamples_at_once_is_that_of_one_resample_at_a_time(shape):
+    rng = np.random.default_rng(sum(shape))
+    scores = np.round(rng.normal(850.0, 20.0, size=shape), 1)  # rounded: ties, as MQIs have
+    per_resample = aggregate.stratified_bootstrap_ci(scores, statistic=lambda x: aggregate.iqm(x), seed=5)
+    assert aggregate.stratified_bootstrap_ci(scores, seed=5) == per_resample  # bit for bit
 
 
 def test_plot_statistics_writes_the_three_figures(tmp_path):

@@ -52,15 +52,28 @@ def _check_confidence(confidence: float) -> None:
         raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
 
 
+def _pooled_iqm(*columns: np.ndarray, axis: int = -1) -> np.ndarray:
+    """:func:`iqm` of the runs x tasks of every resample at once (``scipy.stats.bootstrap``'s vectorized form; the
+    scores in the order of :func:`iqm`'s ``ravel``, so each resample gives the same bits). No NaNs."""
+    pooled = np.stack([np.moveaxis(column, axis, -1) for column in columns], axis=-1)
+    return stats.trim_mean(pooled.reshape(*pooled.shape[:-2], -1), 0.25, axis=-1)
+
+
 def _percentile_ci(
-    samples: Sequence[np.ndarray], statistic: Callable[..., float], confidence: float, n_resamples: int, seed: int
+    samples: Sequence[np.ndarray],
+    statistic: Callable[..., float],
+    confidence: float,
+    n_resamples: int,
+    seed: int,
+    vectorized: bool = False,
 ) -> tuple[float, float]:
-    """``scipy.stats.bootstrap`` of independent samples (percentile method); a constant statistic gives a point."""
+    """``scipy.stats.bootstrap`` of independent samples (percentile method); a constant statistic gives a point.
+    ``vectorized``: ``statistic`` takes an ``axis`` and maps batches of resamples at once."""
     point = statistic(*samples)
     result = stats.bootstrap(
         tuple(samples),
-        lambda *resampled: statistic(*resampled),
-        vectorized=False,
+        statistic if vectorized else lambda *resampled: statistic(*resampled),
+        vectorized=vectorized,
         paired=False,
         confidence_level=confidence,
         n_resamples=n_resamples,
@@ -96,6 +109,8 @@ def stratified_bootstrap_ci(
     if x.shape[0] < 2:
         return float("nan"), float("nan")
     tasks = [x[:, k] for k in range(x.shape[1])]
+    if statistic is iqm and not np.isnan(x).any():  # the default, on all resamples at once (the same CI, ~50x faster)
+        return _percentile_ci(tasks, _pooled_iqm, confidence, n_resamples, seed, vectorized=True)
     return _percentile_ci(tasks, lambda *columns: statistic(np.stack(columns, axis=1)), confidence, n_resamples, seed)
 
 
