@@ -199,12 +199,16 @@ def _fill_episodes(buffers, steps, n_envs, rng):
             buffer.add(obs, next_obs, action, reward, done, infos)
 
 
-@pytest.mark.parametrize(("size", "steps", "n_envs"), [(64, 40, 1), (64, 150, 1), (32, 90, 3)])
+@pytest.mark.parametrize(
+    ("size", "steps", "n_envs", "n_steps"),
+    [(64, 40, 1, 3), (64, 150, 1, 3), (32, 90, 3, 3), (64, 150, 2, 9), (64, 150, 1, 20)],
+)
 @pytest.mark.parametrize("fast_class", [FastNStepReplayBuffer, RewardComponentsNStepReplayBuffer])
-def test_fast_n_step_sampling_is_sb3_s_bit_for_bit(size, steps, n_envs, fast_class):
+def test_fast_n_step_sampling_is_sb3_s_bit_for_bit(size, steps, n_envs, n_steps, fast_class):
     # Partly filled and wrapped-around buffers, one env and several: the same draws of numpy's generator give the same
-    # batches, every number equal bit for bit (also the sign of a zero), as SB3's NStepReplayBuffer.
-    kwargs = dict(device="cpu", n_envs=n_envs, n_steps=3, gamma=0.95)
+    # batches, every number equal bit for bit (also the sign of a zero), as SB3's NStepReplayBuffer; from 8 steps on,
+    # numpy sums a return pairwise.
+    kwargs = dict(device="cpu", n_envs=n_envs, n_steps=n_steps, gamma=0.95)
     reference = NStepReplayBuffer(size, OBS_SPACE, ACT_SPACE, **kwargs)
     fast = fast_class(size, OBS_SPACE, ACT_SPACE, **kwargs)
     _fill_episodes([reference, fast], steps, n_envs, np.random.default_rng(steps))

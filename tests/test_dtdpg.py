@@ -108,6 +108,45 @@ def test_relabel_with_n_step_returns_picks_the_n_step_components_buffer(tmp_path
     assert (loaded.replay_buffer.n_steps, loaded.replay_buffer.gamma) == (3, 0.9)
 
 
+def test_load_with_other_returns_rebuilds_the_buffer_the_model_picked(tmp_path):
+    model = DTDPG("MlpPolicy", _pendulum(), n_steps=3, gamma=0.95, **TINY)
+    model.save(tmp_path / "model")
+    loaded = DTDPG.load(tmp_path / "model", env=_pendulum(), gamma=0.5)  # the returns follow the model's gamma
+    assert (loaded.gamma, loaded.replay_buffer.gamma, loaded.replay_buffer.n_steps) == (0.5, 0.5, 3)
+    assert DTDPG.load(tmp_path / "model", env=_pendulum(), n_steps=5).replay_buffer.n_steps == 5
+    assert type(DTDPG.load(tmp_path / "model", env=_pendulum(), n_steps=1).replay_buffer) is ReplayBuffer
+    # a buffer the user chose stays as given
+    given = DTDPG("MlpPolicy", _pendulum(), replay_buffer_class=ReplayBuffer, **TINY)
+    given.save(tmp_path / "given")
+    with pytest.warns(UserWarning, match="`n_steps=3` is ignored because a custom `replay_buffer_class`"):  # SB3's
+        assert type(DTDPG.load(tmp_path / "given", env=_pendulum(), n_steps=3).replay_buffer) is ReplayBuffer
+
+
+def test_a_batch_of_one_is_refused_with_batch_norm():
+    with pytest.raises(ValueError, match=r"batch_size must be at least 2 with batch normalisation .*got 1"):
+        DTDPG("MlpPolicy", "Pendulum-v1", batch_size=1)
+    # without batch norm a batch of one has no variance to take: SB3's DDPG trains on it
+    plain = dict(actor_norm="none", critic_norm="none")
+    DTDPG("MlpPolicy", "Pendulum-v1", batch_size=1, learning_starts=5, policy_kwargs=plain).learn(10)
+
+
+def test_a_model_of_two_envs_trains_on_one_or_three(tmp_path):
+    model = DTDPG("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=2), **TINY).learn(60)
+    model.save(tmp_path / "two")
+    one = DTDPG.load(tmp_path / "two", env=_pendulum()).learn(40, reset_num_timesteps=False)
+    assert isinstance(one.action_noise, LinearDecayOUNoise) and one.num_timesteps == 100
+    three = DTDPG.load(tmp_path / "two", env=make_vec_env("Pendulum-v1", n_envs=3)).learn(60)
+    assert isinstance(three.action_noise, VectorizedActionNoise) and len(three.action_noise.noises) == 3
+
+
+def test_load_checks_its_switches_and_phases(tmp_path):
+    DTDPG("MlpPolicy", "Pendulum-v1", **TINY).save(tmp_path / "model")
+    with pytest.raises(ValueError, match=r"DTDPG\.load: lean must be True or False, got 'no'"):
+        DTDPG.load(tmp_path / "model", lean="no")
+    loaded = DTDPG.load(tmp_path / "model", phases=[dict(name="destination", n_episodes=3)])
+    assert loaded.phases == [Phase(name="destination", n_episodes=3)]
+
+
 def noise_sigma_of(model: DTDPG) -> float:
     from sb3_dtdpg.common.noise import noise_sigma
 

@@ -3,6 +3,7 @@ enters, the error naming the field and the value."""
 
 import re
 
+import numpy as np
 import pytest
 
 from sb3_dtdpg import DTDPG
@@ -35,7 +36,12 @@ TINY = dict(policy_kwargs=dict(net_arch=[8]), learning_starts=10, batch_size=8)
             "the initial value of the learning-rate schedule must be a finite",
         ),
         (dict(learning_starts=-1), "learning_starts must be an integer >= 0, got -1"),
-        (dict(train_freq=0), "train_freq must be an integer >= 1, got 0"),
+        (dict(train_freq=0), "train_freq must be a Python integer >= 1 or a tuple (frequency, unit) with one, got 0"),
+        (dict(train_freq=[2, "episode"]), "train_freq must be a Python integer >= 1 or a tuple"),  # SB3 refuses lists
+        (
+            dict(train_freq=np.int64(2)),
+            "train_freq must be a Python integer >= 1 or a tuple (frequency, unit) with one, got np.int64(2)",
+        ),  # ... and numpy integers
         (dict(train_freq=(2, "epoch")), "the unit of train_freq must be 'step' or 'episode', got 'epoch'"),
         (dict(gradient_steps=-2), "gradient_steps must be an integer >= 0, or -1, got -2"),
         (dict(gradient_steps=1.5), "gradient_steps must be an integer >= 0, or -1, got 1.5"),

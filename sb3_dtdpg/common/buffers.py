@@ -15,6 +15,31 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from noma_radiomap.compiled import compiled
 
+#: numpy sums up to this many numbers with eight accumulators; longer sums it splits in two (recursively)
+_PAIRWISE_BLOCK = 128
+
+
+@compiled
+def _numpy_sum(terms: np.ndarray, n: int) -> np.float32:
+    """``terms[:n].sum()`` as numpy adds a contiguous row (its pairwise summation, for ``n <=`` 128): one by one
+    from zero below 8 numbers, else in eight interleaved partial sums added pairwise, then the rest one by one."""
+    total = np.float32(0.0)
+    if n < 8:
+        for i in range(n):
+            total += terms[i]
+        return total
+    partial = terms[:8].copy()
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            partial[j] += terms[i + j]
+        i += 8
+    total = ((partial[0] + partial[1]) + (partial[2] + partial[3])) + ((partial[4] + partial[5]) + (partial[6] + partial[7]))
+    while i < n:
+        total += terms[i]
+        i += 1
+    return total
+
 
 @compiled
 def _n_step_samples(
@@ -31,7 +56,7 @@ def _n_step_samples(
     discounts: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """SB3's ``NStepReplayBuffer._get_samples`` for flat observations, one sample at a time: the same float32
-    operations in the same order (each return is ``((r0 d0 m0 + r1 d1 m1) + r2 d2 m2) ...``)."""
+    operations in the same order (each return is the sum of ``r_k d_k m_k`` in numpy's order, :func:`_numpy_sum`)."""
     batch, size = batch_inds.shape[0], rewards.shape[0]
     obs = np.empty((batch, observations.shape[2]), observations.dtype)
     next_obs = np.empty((batch, next_observations.shape[2]), next_observations.dtype)
@@ -40,6 +65,7 @@ def _n_step_samples(
     lengths = np.empty((batch, 1), np.int64)
     final_dones = np.empty((batch, 1), np.float32)
     one, zero = np.float32(1.0), np.float32(0.0)
+    terms = np.empty(n_steps, np.float32)
     for b in range(batch):
         start, env = batch_inds[b], env_inds[b]
         # The last stored transition counts as truncated unless it ended its episode (it may precede a stale one)
@@ -49,10 +75,9 @@ def _n_step_samples(
             if dones[i, env] or timeouts[i, env] or (i == last_valid and not dones[i, env]):
                 end = k
                 break
-        total = zero
         for k in range(n_steps):
-            total += rewards[(start + k) % size, env] * discounts[k] * (one if k <= end else zero)
-        returns[b, 0] = total
+            terms[k] = rewards[(start + k) % size, env] * discounts[k] * (one if k <= end else zero)
+        returns[b, 0] = _numpy_sum(terms, n_steps)
         lengths[b, 0] = end + 1
         last = (start + end) % size
         truncated = timeouts[last, env] or (last == last_valid and not dones[last, env])
@@ -68,12 +93,12 @@ class FastNStepSampling:
     Mixin for SB3's ``NStepReplayBuffer`` and its subclasses: the batch and its n-step returns are gathered in one
     compiled pass, with the same random draws and the same numbers, bit for bit, as SB3's ``_get_samples``
     (``tests/test_buffers.py``), in about a third of its time. Under ``VecNormalize`` (the samples are normalized)
-    SB3's own method runs.
+    and for returns of more than 128 steps SB3's own method runs.
     """
 
     def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> ReplayBufferSamples:
         buffer: Any = self
-        if env is not None:
+        if env is not None or buffer.n_steps > _PAIRWISE_BLOCK:
             return super()._get_samples(batch_inds, env=env)  # type: ignore[misc]
         env_indices = np.random.randint(0, buffer.n_envs, size=batch_inds.shape)
         size, n_envs = buffer.buffer_size, buffer.n_envs

@@ -291,8 +291,9 @@ class CurriculumTransferCallback(BaseCallback):
     def _record(self) -> None:
         self.logger.record("curriculum/phase", self.phase_index)
         self.logger.record("curriculum/episodes_in_phase", self.state["episodes_in_phase"])
-        if self.model.action_noise is not None:
-            self.logger.record("curriculum/noise_sigma", noise_sigma(self.model.action_noise))
+        sigma = noise_sigma(self.model.action_noise) if self.model.action_noise is not None else float("nan")
+        if not np.isnan(sigma):  # SB3's own noises keep their scale private: nothing to log
+            self.logger.record("curriculum/noise_sigma", sigma)
 
     # ------------------------------------------------------------------ checks
     def _check_setup(self) -> None:

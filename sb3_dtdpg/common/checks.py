@@ -40,13 +40,16 @@ def _learning_rate(owner: str, value: Any) -> None:
 
 
 def _train_freq(owner: str, value: Any) -> None:
-    if isinstance(value, (tuple, list)):
+    if isinstance(value, tuple):
         if len(value) != 2:
-            raise ValueError(f"{owner}: train_freq must be an integer or a pair (frequency, unit), got {value!r}")
+            raise ValueError(f"{owner}: train_freq must be an integer or a tuple (frequency, unit), got {value!r}")
         frequency, unit = value
     else:
         frequency, unit = value, "step"
-    _int_at_least(owner, "train_freq", frequency, 1)
+    if type(frequency) is not int or frequency < 1:  # SB3 takes a Python int only (not a list, nor a numpy integer)
+        raise ValueError(
+            f"{owner}: train_freq must be a Python integer >= 1 or a tuple (frequency, unit) with one, got {value!r}"
+        )
     if getattr(unit, "value", unit) not in ("step", "episode"):  # a string or SB3's TrainFrequencyUnit
         raise ValueError(f"{owner}: the unit of train_freq must be 'step' or 'episode', got {unit!r}")
 

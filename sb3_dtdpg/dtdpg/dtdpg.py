@@ -7,7 +7,7 @@ from gymnasium import spaces
 from stable_baselines3 import DDPG
 from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, EvalCallback
-from stable_baselines3.common.noise import ActionNoise
+from stable_baselines3.common.noise import ActionNoise, VectorizedActionNoise
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
@@ -163,10 +163,7 @@ class DTDPG(LeanStep, DDPG):
         check_switches(
             "DTDPG",
             dict(
-                optimize_memory_usage=optimize_memory_usage,
-                reinitialize_at_transfer=reinitialize_at_transfer,
-                lean=lean,
-                backprop=backprop,
+                zip(_SWITCHES, (optimize_memory_usage, reinitialize_at_transfer, lean, backprop), strict=True),
             ),
         )
         check_folder("DTDPG", "curriculum_save_path", curriculum_save_path)
@@ -202,18 +199,39 @@ class DTDPG(LeanStep, DDPG):
         # No env when load() builds the model: the saved action noise is restored afterwards
         if self.action_noise is None and schedule is not None and self.env is not None:
             self.action_noise = decaying_noise(self.action_space.shape, *schedule)
-        if self.replay_buffer_class is None and any(phase.replay_handling == "relabel" for phase in self.phases[1:]):
-            self.replay_buffer_class, buffer_kwargs = reward_components_buffer(self.n_steps, self.gamma)
-            self.replay_buffer_kwargs = {**buffer_kwargs, **self.replay_buffer_kwargs}
-        elif self.replay_buffer_class is None and self.n_steps > 1 and isinstance(self.observation_space, spaces.Box):
-            # SB3's NStepReplayBuffer, sampled faster with the same numbers
-            self.replay_buffer_class = FastNStepReplayBuffer
-            self.replay_buffer_kwargs = {"n_steps": self.n_steps, "gamma": self.gamma, **self.replay_buffer_kwargs}
+        # Without a buffer class given, the model picks one for its returns, and picks again when load() is given
+        # other n_steps or gamma (as SB3's own pick follows the model's n_steps and gamma)
+        self._buffer_follows_returns = self.replay_buffer_class is None
+        if self._buffer_follows_returns:
+            self._pick_replay_buffer()
 
         if _init_setup_model:
             self._setup_model()
 
+    def _pick_replay_buffer(self) -> None:
+        """The replay buffer for the model's returns: the relabelling one when a later phase relabels the replay, the
+        fast n-step one for n-step returns of ``Box`` observations (SB3's ``NStepReplayBuffer``, sampled faster with
+        the same numbers), else SB3's pick."""
+        kwargs = {k: v for k, v in self.replay_buffer_kwargs.items() if k not in ("n_steps", "gamma")}
+        if any(phase.replay_handling == "relabel" for phase in self.phases[1:]):
+            self.replay_buffer_class, returns = reward_components_buffer(self.n_steps, self.gamma)
+        elif self.n_steps > 1 and isinstance(self.observation_space, spaces.Box):
+            self.replay_buffer_class, returns = FastNStepReplayBuffer, {"n_steps": self.n_steps, "gamma": self.gamma}
+        else:
+            self.replay_buffer_class, returns = None, {}
+        self.replay_buffer_kwargs = {**kwargs, **returns}
+
     def _setup_model(self) -> None:
+        if getattr(self, "_buffer_follows_returns", False):  # False in models saved before it was recorded
+            self._pick_replay_buffer()
+        self._build_model()
+        if self.batch_size < 2 and any(isinstance(module, th.nn.BatchNorm1d) for module in self.policy.modules()):
+            raise ValueError(
+                f"{type(self).__name__}: batch_size must be at least 2 with batch normalisation (the policy's actor_norm "
+                f"or critic_norm 'batch'; a batch of one has no variance), got {self.batch_size}"
+            )
+
+    def _build_model(self) -> None:
         configured_n_step = (
             self.n_steps > 1
             and self.replay_buffer_class is not None
@@ -314,6 +332,16 @@ class DTDPG(LeanStep, DDPG):
         env_settings.record(self)
         super().save(path, exclude=exclude, include=include)
 
+    def _setup_learn(self, total_timesteps: int, callback: MaybeCallback = None, *args: Any, **kwargs: Any) -> Any:
+        # SB3 wraps the noise in one copy per env, once: a model loaded onto another number of envs gets copies for
+        # these (the decay schedule, shared by the copies, goes on)
+        noise = self.action_noise
+        if isinstance(noise, VectorizedActionNoise) and len(noise.noises) != self.env.num_envs:
+            base = noise.noises[0]
+            base.reset()
+            self.action_noise = VectorizedActionNoise(base, self.env.num_envs) if self.env.num_envs > 1 else base
+        return super()._setup_learn(total_timesteps, callback, *args, **kwargs)
+
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
         env_settings.check_settings(getattr(self, "env_settings", None), env)
         super().set_env(env, force_reset=force_reset)
@@ -349,10 +377,21 @@ class DTDPG(LeanStep, DDPG):
         # settings given as keyword arguments replace the saved ones: the constructor's checks hold for them too
         # (custom_objects are not checked: they stand in for objects that cannot be unpickled, e.g. learning_rate=0)
         check_off_policy_settings("DTDPG.load", kwargs)
+        check_switches("DTDPG.load", {name: kwargs[name] for name in _SWITCHES if name in kwargs})
+        for folder in ("curriculum_save_path", "tensorboard_log"):
+            check_folder("DTDPG.load", folder, kwargs.get(folder))
+        if kwargs.get("phases") is not None:
+            kwargs["phases"] = parse_phases(kwargs["phases"])
+        data = load_from_zip_file(path, device="cpu", custom_objects=custom_objects, load_data=True)[0] or {}
         if env is not None:
-            data, _, _ = load_from_zip_file(path, device="cpu", custom_objects=custom_objects, load_data=True)
-            env_settings.check_settings((data or {}).get("env_settings"), env, f"the model {path}")
+            env_settings.check_settings(data.get("env_settings"), env, f"the model {path}")
+        # a model saved before its buffer choice was recorded keeps its buffer (the constructor's flag would stand)
+        kwargs.setdefault("_buffer_follows_returns", data.get("_buffer_follows_returns", False))
         return super().load(path, env=env, device=device, custom_objects=custom_objects, **kwargs)
+
+
+#: The constructor's on/off settings
+_SWITCHES = ("optimize_memory_usage", "reinitialize_at_transfer", "lean", "backprop")
 
 
 def _curriculum_evaluations(callbacks: list[BaseCallback]) -> list[EvalCallback]:
