@@ -109,6 +109,18 @@ def test_registration_is_idempotent_and_kwargs_pass_through():
     )
 
 
+def test_a_time_limit_of_make_shortens_missions_and_never_lengthens_them():
+    """The env ends every mission at mission.max_steps (small: 60); gymnasium.make's limit adds a TimeLimit on top."""
+    for limit, expected in [(100, 60), (60, 60), (10, 10), (-1, 60), (None, 60)]:  # -1: no TimeLimit of make's
+        env = gym.make("NomaRadioMap-v0", scenario="small", max_episode_steps=limit)
+        env.reset(seed=0)
+        steps, done = 0, False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(np.zeros(6))
+            steps, done = steps + 1, terminated or truncated
+        assert truncated and steps == expected
+
+
 @pytest.mark.parametrize(
     "kwarg,value",
     [("multiple_access", "fdma"), ("channel", "ricean"), ("reward_phase", "speed"), ("inducing", "manhattan")],

@@ -4,11 +4,20 @@ import copy
 import re
 import time
 
+import numpy as np
 import pytest
 import yaml
 
-from noma_radiomap import Scenario, load_scenario
-from noma_radiomap.scenario import MAX_GRID_CELLS, MAX_MESSAGE_CHARS, MAX_NESTING, MAX_NODES, MAX_SUBSTEPS
+from noma_radiomap import NomaRadioMapEnv, Scenario, load_scenario
+from noma_radiomap.scenario import (
+    MAX_GRID_CELLS,
+    MAX_MESSAGE_CHARS,
+    MAX_NESTING,
+    MAX_NODES,
+    MAX_SUBSTEPS,
+    RANGES,
+    ScenarioLoader,
+)
 
 
 @pytest.fixture(scope="module")
@@ -344,3 +353,157 @@ def test_an_arrival_radius_that_covers_every_start_is_refused_at_load(small_dict
     data["robots"][0]["destinations"].append([1.5, 1.5])  # the start region's centre: 1.1 m reaches all its cells
     with pytest.raises(ValueError, match=r"robots\[0\]\.start: .* within arrival_radius of destination \[1\.5, 1\.5\]"):
         Scenario.from_dict(data)
+
+
+# --- YAML 1.2 integers, merge keys, numpy values, radio settings, the memory cap's variable ----------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "value"),
+    [("0300", 300), ("010", 10), ("0o10", 8), ("0x10", 16), ("1_000", 1000), ("-12", -12), ("1:00", "1:00"), ("0b10", "0b10")],
+)
+def test_integers_are_read_by_yaml_1_2_rules(text, value):
+    """PyYAML's YAML 1.1 rules read 0300 as octal 192, 1:00 as sexagesimal 60 and 0o10 as a string."""
+    from noma_radiomap.scenario import ScenarioLoader
+
+    loaded = yaml.load(f"a: {text}\n", Loader=ScenarioLoader)["a"]
+    assert loaded == value and type(loaded) is type(value)
+
+
+def test_a_leading_zero_is_no_octal_prefix_in_a_scenario_file(tmp_path, small_yaml):
+    assert "max_steps: 60" in small_yaml
+    assert load_scenario(_write(tmp_path, small_yaml.replace("max_steps: 60", "max_steps: 010", 1))).mission.max_steps == 10
+    path = _write(tmp_path, small_yaml.replace("max_steps: 60", "max_steps: 1:00", 1))
+    with pytest.raises(ValueError, match=rf"^{path}: mission\.max_steps: expected an integer, got '1:00' \(str\)"):
+        load_scenario(path)
+    path = _write(tmp_path, small_yaml.replace("max_steps: 60", "max_steps: !!int 1:00", 1))
+    with pytest.raises(ValueError, match=rf"^{path}, line \d+, column \d+: malformed YAML: expected an integer, got '1:00'"):
+        load_scenario(path)
+
+
+def test_merge_keys_work_and_explicit_keys_override_them(tmp_path, small_yaml, small_dict):
+    robot = small_dict["robot"]
+    body = f"body_height: {robot['body_height']}, antenna_height: {robot['antenna_height']}"
+    anchored = small_yaml.replace("name: small", "name: small\nbase: &base {v_max: 0.5, arrival_radius: 0.7}", 1)
+    start, end = anchored.index("robot:\n"), anchored.index("radio:\n")
+    merged = f"{anchored[:start]}robot: {{<<: *base, {body}, arrival_radius: 0.4}}\n{anchored[end:]}"
+    data = yaml.load(merged, Loader=ScenarioLoader)
+    assert data.pop("base") == {"v_max": 0.5, "arrival_radius": 0.7}
+    scenario = Scenario.from_dict(data)
+    assert (scenario.robot.v_max, scenario.robot.arrival_radius) == (0.5, 0.4)  # merged; overridden
+    inline = small_yaml.replace("  v_max: 1.0\n", "  <<: {v_max: 0.5}\n", 1)
+    assert "<<" in inline and load_scenario(_write(tmp_path, inline)).robot.v_max == 0.5
+    twice = _write(tmp_path, small_yaml.replace("  v_max: 1.0\n", "  <<: {v_max: 0.5}\n  v_max: 1.0\n  v_max: 2.0\n", 1))
+    with pytest.raises(ValueError, match=r"malformed YAML: duplicate key 'v_max' \(first at line \d+\)"):
+        load_scenario(twice)
+    not_a_mapping = _write(tmp_path, small_yaml.replace("  v_max: 1.0\n", "  <<: 3\n  v_max: 1.0\n", 1))
+    with pytest.raises(ValueError, match=r"malformed YAML: expected a mapping or list of mappings for merging"):
+        load_scenario(not_a_mapping)
+
+
+def test_numpy_scalars_and_arrays_are_numbers_and_lists(small_dict):
+    data = copy.deepcopy(small_dict)
+    data["room"]["width"] = np.float32(12.0)
+    data["robot"]["v_max"] = np.float16(1.0)
+    data["mission"]["max_steps"] = np.int64(60)
+    data["ap"]["position"] = np.asarray(data["ap"]["position"], dtype=np.float32)
+    data["robots"][0]["destinations"] = np.asarray(data["robots"][0]["destinations"])
+    data["obstacles"][0]["boxes"] = np.asarray(data["obstacles"][0]["boxes"])
+    scenario = Scenario.from_dict(data)
+    assert scenario == Scenario.from_dict(small_dict)
+    assert type(scenario.room.width) is float and type(scenario.mission.max_steps) is int
+    assert all(type(x) is float for x in scenario.ap.position + scenario.robots[0].destinations[0])
+    for value, pattern in [
+        (np.bool_(True), r"room\.width: expected a number, got np\.True_ \(bool\)"),
+        (np.complex64(12.0), r"room\.width: expected a number, got np\.complex64"),
+        (np.float32(np.nan), r"room\.width: expected a finite number, got nan"),
+        (np.array(12.0), r"room\.width: expected a number, got array\(12\.\) \(ndarray\)"),
+    ]:
+        data["room"]["width"] = value
+        with pytest.raises(ValueError, match=pattern):
+            Scenario.from_dict(data)
+    data["room"]["width"] = 12.0
+    data["mission"]["max_steps"] = np.bool_(True)
+    with pytest.raises(ValueError, match=r"mission\.max_steps: expected an integer, got np\.True_ \(bool\)"):
+        Scenario.from_dict(data)
+    data["mission"]["max_steps"] = 60
+    data["robots"][0]["destinations"] = np.array([[True, False]])
+    with pytest.raises(ValueError, match=r"robots\[0\]\.destinations\[0\]\[0\]: expected a number, got True \(bool\)"):
+        Scenario.from_dict(data)
+    data["robots"][0]["destinations"] = np.zeros((0, 2))
+    with pytest.raises(ValueError, match=r"robots\[0\]\.destinations: expected a non-empty list, got array\(\["):
+        Scenario.from_dict(data)
+
+
+@pytest.mark.parametrize("point", [[12.0, 4.0], [6.0, 8.0], [12.0, 8.0], [-0.0001, 4.0]])
+def test_a_destination_on_the_far_walls_is_refused_at_load_as_by_the_reset_option(small_dict, point):
+    """The room's cells span [0, width) x [0, depth): the env's reset option refuses (12, 8); the load does too."""
+    env = NomaRadioMapEnv(scenario=Scenario.from_dict(small_dict))
+    with pytest.raises(ValueError, match=r"options\['destinations'\]\[1\]: .* is outside the room"):
+        env.reset(seed=0, options={"destinations": [[10.0, 2.0], point]})
+    data = copy.deepcopy(small_dict)
+    data["robots"][1]["destinations"] = [point]
+    with pytest.raises(
+        ValueError,
+        match=rf"^robots\[1\]\.destinations\[0\]: {re.escape(str(point))} is outside the room's cells "
+        r"\[0, 12\.0\) x \[0, 8\.0\)",
+    ):
+        Scenario.from_dict(data)
+
+
+def test_a_destination_just_inside_the_far_walls_loads_and_is_a_reset_option(small_dict):
+    data = copy.deepcopy(small_dict)
+    inside = [float(np.nextafter(12.0, 0.0)), 4.0]
+    data["robots"][1]["destinations"] = [inside]
+    env = NomaRadioMapEnv(scenario=Scenario.from_dict(data))
+    env.reset(seed=0, options={"destinations": [[10.0, 2.0], inside]})
+    assert env.destinations[1].tolist() == inside
+
+
+def test_no_builtin_scenario_has_a_destination_on_its_far_walls():
+    from noma_radiomap import list_scenarios
+
+    for name in list_scenarios():
+        scenario = load_scenario(name)
+        points = np.array([p for robot in scenario.robots for p in robot.destinations])
+        assert scenario.room.contains(points).all(), name
+
+
+def test_a_noise_power_that_would_underflow_is_refused(small_dict):
+    """The tester's case: N0 B = 1e-28 W/Hz x 1e-300 Hz is 0 in float64, and a step divided by it."""
+    data = copy.deepcopy(small_dict)
+    data["radio"].update(noise_dbm_per_hz=-250.0, bandwidth_per_robot_hz=1e-300)
+    data["interferers"] = []
+    with pytest.raises(ValueError, match=r"radio\.bandwidth_per_robot_hz: 1e-300 is outside the physical range \[1, 1e\+10\]"):
+        Scenario.from_dict(data)
+
+
+@pytest.mark.parametrize("multiple_access", ["noma", "oma"])
+def test_the_extremes_of_the_radio_ranges_give_finite_rates(small_dict, multiple_access):
+    """The corner of RANGES with the largest SINR: the least noise over the narrowest band, the strongest AP at the
+    lowest frequency, no interferer, a robot right under the AP (path loss clipped at 1 m)."""
+    data = copy.deepcopy(small_dict)
+    data["radio"].update(
+        noise_dbm_per_hz=RANGES["radio.noise_dbm_per_hz"][0],
+        bandwidth_per_robot_hz=RANGES["radio.bandwidth_per_robot_hz"][0],
+        frequency_mhz=RANGES["radio.frequency_mhz"][0],
+    )
+    data["ap"].update(position=[1.25, 1.25, data["robot"]["antenna_height"]], max_power_dbm=RANGES["ap.max_power_dbm"][1])
+    data["interferers"] = []
+    env = NomaRadioMapEnv(scenario=Scenario.from_dict(data), multiple_access=multiple_access, reward_phase="combined")
+    obs, _ = env.reset(seed=0, options={"starts": [[1.25, 1.25], [1.25, 6.75]]})
+    for action in ([0.0, 0.0, 1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 0.0, 0.0, -1.0]):  # full power to one or both
+        obs, reward, _, _, info = env.step(np.array(action))
+        assert np.isfinite(obs).all() and np.isfinite(reward)
+        assert np.isfinite(info["rate_bps"]).all() and np.isfinite(info["sinr_db"]).all()
+        assert info["sinr_db"].max() > 250.0  # the SINR is huge indeed (about 290 dB), and finite
+    assert np.isfinite(env.radio_map.sinr_map_db).all()
+
+
+@pytest.mark.parametrize("text", ["inf", "1e400", "-inf", "nan", "abc", "0"])
+def test_a_bad_memory_cap_variable_is_named_without_a_scenario_file(monkeypatch, tmp_path, small_yaml, text):
+    monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", text)
+    message = rf"^NOMA_RADIOMAP_MAX_MEMORY_BYTES: expected a positive number of bytes, got {re.escape(repr(text))}$"
+    for scenario in ("small", _write(tmp_path, small_yaml)):
+        with pytest.raises(ValueError, match=message):
+            load_scenario(scenario)

@@ -436,6 +436,51 @@ def test_max_episode_steps_of_the_vector_env_must_be_an_integer(value):
     assert NomaRadioMapVecEnv(2, scenario="small", max_episode_steps=np.int64(5)).max_episode_steps == 5
 
 
+def test_max_episode_steps_of_the_vector_env_must_not_exceed_the_missions():
+    with pytest.raises(
+        ValueError,
+        match=r"max_episode_steps must be at most mission\.max_steps = 60 of scenario 'small' \(its missions end there\), "
+        r"got 61",
+    ):
+        gym.make_vec("NomaRadioMap-v0", num_envs=2, scenario="small", max_episode_steps=61)
+    with pytest.raises(ValueError, match=r"max_episode_steps must be at most mission\.max_steps = 60 .* got 100"):
+        make_mission_vec_env("NomaRadioMap-v0", n_envs=2, seed=0, env_kwargs={"scenario": "small", "max_episode_steps": 100})
+    assert NomaRadioMapVecEnv(2, scenario="small", max_episode_steps=60).max_episode_steps == 60
+    assert NomaRadioMapVecEnv(2, scenario="small", task="paper", max_episode_steps=1000).max_episode_steps == 1000
+
+
+@pytest.mark.parametrize(
+    ("actions", "match"),
+    [
+        (np.zeros((5, 6)), r"actions: expected shape \(2, 6\) \(one flat action per mission\), got shape \(5, 6\)"),
+        (np.zeros((1, 6)), r"actions: expected shape \(2, 6\) \(one flat action per mission\), got shape \(1, 6\)"),
+        (np.zeros((2, 7)), r"actions: expected shape \(2, 6\) .* got shape \(2, 7\)"),
+        (np.zeros(3), r"actions: expected shape \(2, 6\) .* got shape \(3,\)"),
+        ("garbage", r"actions: expected shape \(2, 6\) .* got shape \(\)"),
+        (np.zeros((2, 6), dtype=bool), r"actions: expected real numbers, got dtype bool"),
+        ([[0.0] * 6, [0.0] * 5], r"actions: expected an array of shape \(2, 6\), got list"),
+        (np.array([[0.0] * 6, [0.0] * 5 + [np.nan]]), r"actions\[1, 5\] \(mission 1, robot 1, power\): expected a finite"),
+    ],
+    ids=["5_missions", "1_mission", "7_components", "flat", "a_string", "bools", "ragged", "nan"],
+)
+@pytest.mark.parametrize("ended", [[True, True], [True, False]], ids=["all_resetting", "one_resetting"])
+def test_the_action_batch_is_checked_on_an_autoreset_step(actions, match, ended):
+    """The step after an episode ends resets its mission and ignores its action, but the batch is checked whole."""
+    env = NomaRadioMapVecEnv(2, scenario="small", max_episode_steps=2)
+    env.reset(seed=0)
+    env.step(np.zeros((2, 6)))
+    if not ended[1]:
+        env.reset(seed=5, options={"reset_mask": np.array([False, True])})
+    assert env.step(np.zeros((2, 6)))[3].tolist() == ended
+    before = (env.positions.copy(), env.step_counts.copy(), env.core.outage_steps.copy())
+    with pytest.raises(ValueError, match=match):
+        env.step(actions)
+    for old, new in zip(before, (env.positions, env.step_counts, env.core.outage_steps), strict=True):
+        np.testing.assert_array_equal(old, new)
+    _, reward, _, truncated, _ = env.step(np.zeros((2, 6)))  # the autoreset step, taken now
+    assert env.step_counts.tolist() == [0, 0 if ended[1] else 2] and not truncated[0] and reward[0] == 0.0
+
+
 def test_study_worker_takes_the_cli_options_and_defaults(monkeypatch, capsys):
     """The worker's runs are those ``sb3-dtdpg reproduce`` / ``compare`` train with the same options (same run ids)."""
     from sb3_dtdpg.experiments import distributed

@@ -102,7 +102,7 @@ def memory_cap() -> int:
         return int(MAX_MEMORY_BYTES)
     try:
         value = int(float(text))
-    except ValueError:
+    except (ValueError, OverflowError):  # not a number, NaN; inf and 1e400 (float("1e400") is inf)
         value = -1
     if value <= 0:
         raise ValueError(f"{_MEMORY_VARIABLE}: expected a positive number of bytes, got {text[:40]!r}")

@@ -9,7 +9,9 @@ point :func:`make_env` builds the env and wraps it in a ``TimeLimit`` of its own
 ``gymnasium.make("NomaRadioMap-v0", scenario="small").spec.max_episode_steps`` is ``small``'s 60 and the
 default ``mall`` gives 300 (the paper's task: 1000). ``gymnasium.make(..., max_episode_steps=n)`` adds a shorter
 limit on top: the env cannot see it, so every ``info`` of the single env carries the episode summary as of that
-step (``mqi``, ``is_success``, ...), and the last one of an episode has it whatever limit ends the episode.
+step (``mqi``, ``is_success``, ...), and the last one of an episode has it whatever limit ends the episode. A
+longer one does not lengthen the missions: they still end at ``mission.max_steps`` (the env's own limit), while
+``spec.max_episode_steps`` reports the longer one (Gymnasium's wrapper; the entry point never sees it).
 
 ``gymnasium.make_vec(env_id, num_envs=N)`` builds the batched :class:`~noma_radiomap.vector.NomaRadioMapVecEnv`
 (the ids' ``vector_entry_point``; its truncation: its ``max_episode_steps`` kwarg); ``vectorization_mode="sync"``

@@ -5,19 +5,21 @@ interferers, the obstacles (objects built from axis-aligned boxes, the paper's "
 robots' missions and the mission constants. All dataclasses are frozen and hold tuples only, so a
 :class:`Scenario` is hashable and can key caches (:meth:`noma_radiomap.RadioMap.for_scenario`).
 
-Every field is validated on construction from a mapping (:meth:`Scenario.from_dict`); a bad field
-raises a ``ValueError`` naming its path (e.g. ``obstacles[3].boxes[1]``) and the offending value. An unknown
-key is reported with the closest known one (``unknown key 'wal_loss_db' (did you mean 'wall_loss_db'?)``).
+Every field is validated on construction from a mapping (:meth:`Scenario.from_dict`, which also takes numpy
+scalars and arrays); a bad field raises a ``ValueError`` naming its path (e.g. ``obstacles[3].boxes[1]``) and the
+offending value. An unknown key is reported with the closest known one (``unknown key 'wal_loss_db' (did you mean
+'wall_loss_db'?)``).
 
-YAML files are read with YAML 1.2 number rules (``15e3`` and ``1.0e9`` are numbers, not strings), duplicate
-keys are errors, and a file that is not UTF-8, nests deeper than :data:`MAX_NESTING`, is larger than
-:data:`MAX_FILE_BYTES` or holds more than :data:`MAX_NODES` values once its aliases are expanded (an alias
-bomb) gives a ``ValueError`` naming the file. Limits checked at load time, before anything
-is built: at most :data:`MAX_GRID_CELLS` grid cells, :data:`MAX_SUBSTEPS` motion sub-steps per env step
-(``V_max time_step`` over half a cell), :data:`MAX_LIST_ITEMS` entries in any list, the estimated memory of
-the radio map and the env's tables (:data:`noma_radiomap.radiomap.MAX_MEMORY_BYTES`), and physical ranges
-(:data:`RANGES`) for every radio, power, height and mission constant. Error messages quote values through
-a bounded ``repr`` (at most :data:`MAX_MESSAGE_CHARS` characters), so a YAML alias bomb cannot hang them.
+YAML files are read with YAML 1.2 number rules (``15e3`` and ``1.0e9`` are numbers, not strings; ``010`` is 10,
+``0o10`` 8, ``0x10`` 16 and ``1:00`` a string), merge keys (``<<: *base``) work, duplicate keys are errors, and a
+file that is not UTF-8, nests deeper than :data:`MAX_NESTING`, is larger than :data:`MAX_FILE_BYTES` or holds more
+than :data:`MAX_NODES` values once its aliases are expanded (an alias bomb) gives a ``ValueError`` naming the file.
+Limits checked at load time, before anything is built: at most :data:`MAX_GRID_CELLS` grid cells,
+:data:`MAX_SUBSTEPS` motion sub-steps per env step (``V_max time_step`` over half a cell), :data:`MAX_LIST_ITEMS`
+entries in any list, the estimated memory of the radio map and the env's tables
+(:data:`noma_radiomap.radiomap.MAX_MEMORY_BYTES`), and physical ranges (:data:`RANGES`) for every radio, power,
+height and mission constant. Error messages quote values through a bounded ``repr`` (at most
+:data:`MAX_MESSAGE_CHARS` characters), so a YAML alias bomb cannot hang them.
 """
 
 from __future__ import annotations
@@ -80,7 +82,9 @@ RANGES: dict[str, tuple[float, float]] = {
     "radio.wall_loss_db": (0.0, 100.0),
     "radio.wall_loss_step_db": (0.0, 100.0),
     "radio.noise_dbm_per_hz": (-250.0, -100.0),  # thermal noise: -174 dBm/Hz
-    "radio.bandwidth_per_robot_hz": (0.0, 1e10),
+    # At least 1 Hz: the noise N0 B (>= 1e-28 W) never underflows to 0, and the largest SINR (1 kW at 1 m, path
+    # loss >= 12 dB at 100 MHz: below 1e32) and every rate stay finite
+    "radio.bandwidth_per_robot_hz": (1.0, 1e10),
     "radio.qos_rate_bps": (0.0, 1e12),
     "ap.position[2]": (0.0, 50.0),
     "ap.max_power_dbm": (-100.0, 60.0),  # 60 dBm = 1 kW
@@ -308,8 +312,12 @@ class Scenario:
         :param data: the scenario mapping (as loaded from YAML)
         :param source: where it came from, used in error messages
         :return: the validated scenario
-        :raises ValueError: naming the field path and the offending value
+        :raises ValueError: naming the field path and the offending value (or ``NOMA_RADIOMAP_MAX_MEMORY_BYTES``
+            when it is not a positive number of bytes)
         """
+        from noma_radiomap.radiomap import memory_cap  # the radio map's module imports this one
+
+        memory_cap()  # a bad cap is the environment's fault, not the scenario's: its error names no file
         try:
             return _parse_scenario(data, source)
         except ValueError as error:
@@ -402,7 +410,17 @@ def _mapping(value: Any, path: str, required: tuple[str, ...], optional: tuple[s
     return value
 
 
+def _plain(value: Any) -> Any:
+    """A numpy integer or float scalar as the Python number it holds (``np.bool_`` is neither); else ``value``."""
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    return value
+
+
 def _number(value: Any, path: str, *, positive: bool = False, nonnegative: bool = False) -> float:
+    value = _plain(value)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"{path}: expected a number, got {_describe(value)}")
     if abs(value) > 1e300:  # an int too large for a float, or a float too large for arithmetic
@@ -419,6 +437,7 @@ def _number(value: Any, path: str, *, positive: bool = False, nonnegative: bool 
 
 
 def _integer(value: Any, path: str, *, positive: bool = False) -> int:
+    value = _plain(value)
     if isinstance(value, bool) or not isinstance(value, int):
         if isinstance(value, float) and value.is_integer():
             value = int(value)
@@ -445,13 +464,14 @@ def _string(value: Any, path: str) -> str:
 
 
 def _list(value: Any, path: str, *, non_empty: bool = False) -> list[Any]:
-    if not isinstance(value, (list, tuple)):
+    array = isinstance(value, np.ndarray) and value.ndim > 0  # a numpy array is read as its nested lists
+    if not (array or isinstance(value, (list, tuple))):
         raise ValueError(f"{path}: expected a list, got {_describe(value)}")
     if non_empty and len(value) == 0:
-        raise ValueError(f"{path}: expected a non-empty list, got {value!r}")
+        raise ValueError(f"{path}: expected a non-empty list, got {_quote(value)}")
     if len(value) > MAX_LIST_ITEMS:
         raise ValueError(f"{path}: {len(value)} entries, more than the limit of {MAX_LIST_ITEMS}")
-    return list(value)
+    return value.tolist() if array else list(value)
 
 
 def _vector(value: Any, path: str, length: int) -> tuple[float, ...]:
@@ -465,6 +485,12 @@ def _in_room(point: tuple[float, ...], room: Room, path: str) -> None:
     x, y = point[0], point[1]
     if not (0.0 <= x <= room.width and 0.0 <= y <= room.depth):
         raise ValueError(f"{path}: {list(point)} is outside the room [0, {room.width}] x [0, {room.depth}]")
+
+
+def _on_floor(point: tuple[float, ...], room: Room, path: str) -> None:
+    """A point a robot must reach: in the room as :meth:`Room.contains` (the env's check of its reset options)."""
+    if not room.contains(np.asarray(point)):
+        raise ValueError(f"{path}: {list(point)} is outside the room's cells [0, {room.width}) x [0, {room.depth})")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -617,7 +643,7 @@ def _parse_robots(data: Any, room: Room) -> tuple[RobotMission, ...]:
             for j, p in enumerate(_list(d["destinations"], f"{path}.destinations", non_empty=True))
         )
         for j, p in enumerate(destinations):
-            _in_room(p, room, f"{path}.destinations[{j}]")
+            _on_floor(p, room, f"{path}.destinations[{j}]")
         result.append(RobotMission(start=start, destinations=destinations))  # type: ignore[arg-type]
     return tuple(result)
 
@@ -748,15 +774,24 @@ except ImportError:  # PyYAML built without libyaml
 
 class ScenarioLoader(_SafeLoader):
     """
-    PyYAML's safe loader with YAML 1.2 floats (``15e3``, ``1.0e9``: PyYAML's YAML 1.1 rules read them as
-    strings), duplicate keys refused, nesting limited to :data:`MAX_NESTING` and the number of values, aliases
-    expanded (a list used through 1000 aliases counts 1000 times), to :data:`MAX_NODES`; recursive aliases are
-    refused. The counts are made while the file is composed, before any Python object is built.
+    PyYAML's safe loader with YAML 1.2 core-schema numbers (PyYAML's YAML 1.1 rules read ``15e3`` and ``1.0e9`` as
+    strings, ``010`` as 8 and ``1:00`` as 60; here they are 15000.0, 1e9, 10 and a string; ``0o10`` is 8 and
+    ``0x10`` 16), merge keys (``<<: *base``), duplicate keys refused, nesting limited to :data:`MAX_NESTING` and
+    the number of values, aliases expanded (a list used through 1000 aliases counts 1000 times), to
+    :data:`MAX_NODES`; recursive aliases are refused. The counts are made while the file is composed, before any
+    Python object is built.
     """
 
+    def flatten_mapping(self, node: yaml.MappingNode) -> None:
+        # Merging rewrites the node, and those it merges, in place: note their own keys first, once
+        explicit: dict[int, list[yaml.Node]] = self.__dict__.setdefault("_explicit_keys", {})
+        explicit.setdefault(id(node), [key_node for key_node, _ in node.value if key_node.tag != _MERGE_TAG])
+        super().flatten_mapping(node)
+
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        self.flatten_mapping(node)  # merge keys (``<<: *base``) first; an explicit key overrides a merged one
         seen: dict[Any, yaml.Node] = {}
-        for key_node, _ in node.value:
+        for key_node in self._explicit_keys[id(node)]:  # duplicates among the mapping's own keys
             key = self.construct_object(key_node, deep=deep)
             try:
                 hash(key)
@@ -804,9 +839,20 @@ class NodeLimitError(yaml.composer.ComposerError):
     """A scenario file holds more than :data:`MAX_NODES` values once its aliases are expanded."""
 
 
-# YAML 1.2 core schema floats (the 1.1 pattern of PyYAML needs a dot and a signed exponent).
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+_INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
+# YAML 1.2 core schema numbers replace PyYAML's YAML 1.1 ones: its ints read ``010`` as octal 8, ``1:00`` as
+# sexagesimal 60 and ``0b10`` as binary, its floats need a dot and a signed exponent and read ``1:30.0`` as 5430.0.
+ScenarioLoader.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers if tag not in (_INT_TAG, _FLOAT_TAG)]
+    for first, resolvers in yaml.resolver.Resolver.yaml_implicit_resolvers.items()
+}
+# Decimal (``_`` may group digits, as in the floats), ``0o`` octal and ``0x`` hexadecimal integers.
 ScenarioLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
+    _INT_TAG, re.compile(r"^(?:[-+]?[0-9][0-9_]*|0o[0-7]+|0x[0-9a-fA-F]+)$"), list("-+0123456789")
+)
+ScenarioLoader.add_implicit_resolver(
+    _FLOAT_TAG,
     re.compile(
         r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
         |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
@@ -817,6 +863,20 @@ ScenarioLoader.add_implicit_resolver(
     ),
     list("-+0123456789."),
 )
+
+
+def _construct_int(loader: ScenarioLoader, node: yaml.ScalarNode) -> int:
+    """A YAML 1.2 integer: decimal (a leading 0 is no octal prefix), ``0o`` octal or ``0x`` hexadecimal."""
+    text = str(loader.construct_scalar(node)).replace("_", "")
+    try:
+        return int(text, 0) if text.startswith(("0o", "0x")) else int(text, 10)
+    except ValueError:  # a scalar tagged ``!!int`` that is not one
+        raise yaml.constructor.ConstructorError(
+            None, None, f"expected an integer, got {_quote(node.value)}", node.start_mark
+        ) from None
+
+
+ScenarioLoader.add_constructor(_INT_TAG, _construct_int)
 
 
 def _read_yaml(content: bytes, source: str) -> Any:

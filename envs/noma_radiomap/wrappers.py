@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from noma_radiomap.actions import check_action
 from noma_radiomap.observations import DISTANCE_SCALE, goal_features
 
 __all__ = ["PowerShares", "RelativeGoalObservation", "goal_features", "power_shares"]
@@ -83,12 +84,15 @@ class PowerShares(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         self.n_robots = int(env.unwrapped.n_robots)
 
     def action(self, action: np.ndarray) -> np.ndarray:
+        """
+        :param action: the agent's action, shape (3U,)
+        :return: the action for the env: the motion unchanged, the powers as shares (:func:`power_shares`)
+        :raises ValueError: as the env's own check (:func:`~noma_radiomap.actions.check_action`): a wrong shape, a
+            non-real dtype or a NaN/inf component (a NaN power must not become "no power")
+        :raises ResetNeeded: before the first reset, as the env
+        """
         base: Any = self.env.unwrapped
-        try:
-            values = np.array(action, dtype=np.float64).reshape(-1)
-        except (TypeError, ValueError):
-            return action
-        if values.shape != (3 * self.n_robots,) or not np.isfinite(values).all():
-            return action  # the env refuses it, naming what is wrong (a NaN power must not become "no power")
+        base.core.check_reset()  # the env's order: not reset, then a bad action
+        values = check_action(action, self.n_robots).reshape(-1)
         values[2::3] = power_shares(values[2::3], ~np.asarray(base.arrived, dtype=bool))
         return values
