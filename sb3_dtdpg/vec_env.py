@@ -83,10 +83,10 @@ class MissionVecEnv(VecEnv):
         self._next_options: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
 
     def reset(self) -> VecEnvObs:
-        options = [opt or None for opt in self._next_options]
-        self.vec_env.reset_missions(np.arange(self.num_envs), self._next_seeds, options)
+        seeds, options = self._next_seeds, [opt or None for opt in self._next_options]
+        self._clear_next_reset()  # they serve this reset, also one that refuses them (the next reset draws anew)
+        self.vec_env.reset_missions(np.arange(self.num_envs), seeds, options)
         self.reset_infos = [{} for _ in range(self.num_envs)]
-        self._clear_next_reset()
         return self.vec_env.observations()
 
     def step_async(self, actions: np.ndarray) -> None:
