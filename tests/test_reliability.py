@@ -144,9 +144,15 @@ def test_a_second_job_on_a_busy_folder_is_refused(tmp_path):
         with pytest.raises(OutputBusyError, match="in use by another job"):
             run_compare(tmp_path, budget="_micro", seeds=1, progress=False)
         with pytest.raises(OutputBusyError):
-            run_reproduce(tmp_path, budget="_micro", seeds=1, progress=False, train=False)
+            run_reproduce(tmp_path, budget="_micro", seeds=1, progress=False)
     with output_lock(tmp_path):  # released
         pass
+
+
+def test_report_only_of_a_folder_without_finished_runs_is_refused_and_creates_nothing(tmp_path):
+    with pytest.raises(ValueError, match=r"holds no finished runs of this job \(budget '_micro', 1 seeds.*train=True"):
+        run_reproduce(tmp_path / "none", budget="_micro", seeds=1, progress=False, train=False)
+    assert not (tmp_path / "none").exists()
 
 
 def test_the_lock_of_a_killed_job_is_released(tmp_path):

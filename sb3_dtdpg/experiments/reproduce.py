@@ -37,6 +37,7 @@ from sb3_dtdpg.experiments.budgets import check_seeds
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
 from sb3_dtdpg.experiments.paper_task import paper_task_specs, paper_task_tables
 from sb3_dtdpg.experiments.runs import Budget, RunReport, RunSpec, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.storage import result_path
 
 __all__ = [
     "DEFAULT_EXPERIMENTS",
@@ -264,6 +265,18 @@ def _check_arguments(
         raise ValueError(f"multiple_access: unknown {modes}, expected some of ['noma', 'oma']")
 
 
+def _check_report_only(train: bool, out: Path, budget: Budget, seeds: int, hyperparams: str, observation: str) -> None:
+    """:raises ValueError: not ``train`` and ``out`` holds no finished run of the job (a report of nothing: blanks)"""
+    if train:
+        return
+    specs = reproduce_specs(budget, seeds, hyperparams, observation).values()
+    if not any(result_path(out, spec).is_file() for group in specs for spec in group):
+        raise ValueError(
+            f"{out} holds no finished runs of this job (budget {budget.name!r}, {seeds} seeds, hyperparams "
+            f"{hyperparams!r}, observation {observation!r}): train them first (train=True)"
+        )
+
+
 def run_reproduce(
     out: str | Path = "results/reproduce",
     budget: str | Budget = "tiny",
@@ -294,7 +307,8 @@ def run_reproduce(
         finished run either way
     :param multiple_access: train only the runs of these downlink modes (``"noma"``, ``"oma"``; None: both)
     :return: the tables, by name
-    :raises ValueError: on a bad argument, or a budget that cannot train a run (before any run starts)
+    :raises ValueError: on a bad argument, a budget that cannot train a run (before any run starts), or, with
+        ``train=False``, an ``out`` that holds no finished run of this job (nothing is created)
     :raises OutputBusyError: another job is using ``out``
     :raises RunMismatchError: ``out`` holds a result of another run under one of these run ids (another budget,
         scenario or hyperparameters): use another folder
@@ -305,6 +319,7 @@ def run_reproduce(
     seeds = budget.seeds if seeds is None else seeds
     _check_arguments(seeds, observation, experiments, multiple_access)
     out = Path(out)
+    _check_report_only(train, out, budget, seeds, hyperparams, observation)
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
