@@ -128,12 +128,17 @@ def _split_hyperparams(args: argparse.Namespace) -> None:
         args.overrides = parse_overrides(items)
 
 
+def default_preset(algos: Sequence[str]) -> str:
+    """:return: the hyperparameter set of the algorithms when none is given: ``tuned`` where every one has it"""
+    return "tuned" if all(algo in ("dtdpg", "ddpg") for algo in algos) else "paper"
+
+
 def _hyperparams(args: argparse.Namespace, algos: Sequence[str]) -> str:
     """The hyperparameter set of a command: ``--preset``, else ``tuned`` where every algorithm has it."""
     _split_hyperparams(args)
     if args.preset is not None:
         return args.preset
-    if all(algo in ("dtdpg", "ddpg") for algo in algos):
+    if default_preset(algos) == "tuned":
         return "tuned"
     if len(algos) > 1:
         print(
@@ -234,6 +239,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str) -> int:
     """``train`` on a NomaRadioMap env: a run of :func:`sb3_dtdpg.experiments.runs.run_one`, checkpointed."""
+    from sb3_dtdpg.evaluation import format_ci
     from sb3_dtdpg.experiments.runs import DamagedRecordError, RunSpec, output_lock, read_checkpoint, run_one
 
     spec = RunSpec(
@@ -288,7 +294,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
         f"{spec.run_id}: {result['train']['timesteps']} steps, {result['train']['episodes']} episodes"
         + (f" (resumed after episode {resumed})" if resumed is not None else "")
         + f", last reward phase {reward_phase!r}; test ({spec.eval_episodes} Rayleigh episodes, {reward_phase!r} "
-        f"reward): success {100 * summary['success_rate']:.0f} %, MQI {summary['mqi']:.1f} ± {summary['mqi_ci']:.1f}; "
+        f"reward): success {100 * summary['success_rate']:.0f} %, MQI {format_ci(summary['mqi'], summary['mqi_ci'])}; "
         f"model: {run_dir / 'model.zip'}, result: {run_dir / 'result.json'}, TensorBoard: {Path(args.tb) / spec.run_id}"
     )
     return 0
@@ -910,8 +916,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         choices=_EXPERIMENTS,
         default=None,
-        help="train only the runs of these experiments (default: all but paper_task_reality, about 5 CPU hours at the "
-        "paper's scale); the tables use every finished run",
+        help="train only the runs of these experiments (default: all but paper_task_reality; at the paper's scale about "
+        "75 minutes on 2 cores without the paper task, which takes about 5 hours more); the tables use every finished run",
     )
     p.add_argument(
         "--multiple-access",

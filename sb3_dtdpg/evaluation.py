@@ -20,7 +20,7 @@ from scipy import stats
 
 from sb3_dtdpg.env_settings import check_settings, trained_settings
 
-__all__ = ["EvaluationResult", "Planner", "evaluate", "mean_ci", "robot_positions"]
+__all__ = ["EvaluationResult", "Planner", "evaluate", "format_ci", "mean_ci", "robot_positions"]
 
 
 @runtime_checkable
@@ -57,6 +57,23 @@ def mean_ci(values: Sequence[float] | np.ndarray, confidence: float = 0.95) -> t
         return mean, math.nan
     sem = float(x.std(ddof=1)) / math.sqrt(x.size)
     return mean, float(stats.t.ppf(0.5 + confidence / 2.0, df=x.size - 1) * sem)
+
+
+def format_ci(value: float | None, half: float | None, digits: int = 1, scale: float = 1.0) -> str:
+    """
+    ``"mean ± half-width"`` for a table cell: ``"-"`` without a value, ``"mean ± n/a"`` when the CI is
+    undefined (e.g. one seed).
+
+    :param value: the mean
+    :param half: the CI half-width
+    :param digits: decimals
+    :param scale: factor applied to both (e.g. 100 for percentages)
+    :return: the cell text
+    """
+    if value is None or not np.isfinite(value):
+        return "-"
+    text = f"{value * scale:.{digits}f}"
+    return text + (f" ± {half * scale:.{digits}f}" if half is not None and np.isfinite(half) else " ± n/a")
 
 
 def robot_positions(env: gym.Env) -> np.ndarray:
@@ -109,7 +126,7 @@ class EvaluationResult:
         summary = self.summary()
         return (
             f"EvaluationResult({self.n_episodes} episodes: success {100 * summary['success_rate']:.0f} %, "
-            f"MQI {summary['mqi']:.1f} ± {summary['mqi_ci']:.1f}, outage steps {summary['outage_steps']:.1f}, "
+            f"MQI {format_ci(summary['mqi'], summary['mqi_ci'])}, outage steps {summary['outage_steps']:.1f}, "
             f"mission time {summary['mission_time']:.1f}; .summary() for the means, .episodes for the records)"
         )
 

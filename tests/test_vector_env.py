@@ -1,6 +1,7 @@
 """The batched mission env (NomaRadioMapVecEnv, MissionVecEnv): same transitions as N single envs, the SB3 and
 Gymnasium vector-env contracts, and DT-DPG / the baselines training from it."""
 
+import dataclasses
 import re
 
 import gymnasium as gym
@@ -503,6 +504,28 @@ def test_study_worker_takes_the_cli_options_and_defaults(monkeypatch, capsys):
     distributed.main(["compare", "--budget", "tiny", "--seeds", "1", "--hyperparams", "paper", *storage])
     assert [s.run_id for s in taken.pop("ids")] == [s.run_id for s in compare_specs(BUDGETS["tiny"], 1, hyperparams="paper")]
     assert "--seeds is deprecated, use --n-seeds" in capsys.readouterr().err
+    # compare's options that pick its runs: algorithms (and so the preset), env id (and so its observation), scenario
+    picks = ["--algos", "dtdpg", "td3", "--env", "NomaRadioMapPaper-v0", "--scenario", "small"]
+    distributed.main(["compare", "--budget", "tiny", "--n-seeds", "1", *picks, *storage])
+    budget = dataclasses.replace(BUDGETS["tiny"], scenario="small")
+    expected = compare_specs(budget, 1, ["dtdpg", "td3"], ["noma", "oma"], "NomaRadioMapPaper-v0", "paper", "paper")
+    assert [s.run_id for s in taken.pop("ids")] == [s.run_id for s in expected]
+    assert {(s.scenario, s.observation, s.env_id) for s in expected} == {("small", "paper", "NomaRadioMapPaper-v0")}
+    with pytest.raises(SystemExit):
+        distributed.main(["compare", "--env", "Pendulum-v1", *storage])
+    assert "--env: compare runs on the NomaRadioMap envs, got Pendulum-v1" in capsys.readouterr().err
+
+
+def test_a_study_worker_without_optuna_names_the_extra_in_one_line(monkeypatch, capsys):
+    import sys
+
+    from sb3_dtdpg.experiments import distributed
+
+    monkeypatch.setitem(sys.modules, "optuna", None)  # not installed
+    with pytest.raises(SystemExit) as exit_info:
+        distributed.main(["compare", "--budget", "tiny", "--out", "out", "--storage", "s.log", "--study-name", "job"])
+    errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
+    assert exit_info.value.code == 2 and len(errors) == 1 and "need the 'zoo' extra (optuna is not installed)" in errors[0]
 
 
 def test_a_study_worker_meeting_another_runs_result_says_so_in_one_line(monkeypatch, capsys):

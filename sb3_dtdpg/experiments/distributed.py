@@ -15,6 +15,7 @@ options on the CLI later find the same runs)::
 """
 
 import argparse
+import dataclasses
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -27,9 +28,12 @@ def study_specs(
     budget: str = "paper",
     seeds: int | None = None,
     hyperparams: str = "tuned",
-    observation: str = "goal",
+    observation: str | None = "goal",
     experiments: Sequence[str] | None = None,
     multiple_access: Sequence[str] | None = None,
+    algos: Sequence[str] | None = None,
+    env_id: str | None = None,
+    scenario: str | None = None,
 ) -> list[RunSpec]:
     """
     The runs of a job, in the order ``reproduce`` / ``compare`` run them (the same list on every machine).
@@ -38,10 +42,13 @@ def study_specs(
     :param budget: a budget name
     :param seeds: seeds per configuration (None: the budget's)
     :param hyperparams: ``"tuned"`` (the CLI's default) or ``"paper"``
-    :param observation: ``"goal"``, ``"destinations"`` or ``"paper"``
+    :param observation: ``"goal"``, ``"destinations"`` or ``"paper"`` (None, ``compare`` only: the env id's)
     :param experiments: ``reproduce`` only: the runs of these experiments (None: those ``sb3-dtdpg reproduce``
         trains by default, all but ``paper_task_reality``)
     :param multiple_access: the downlink modes (None: ``noma`` and ``oma``)
+    :param algos: ``compare`` only: the algorithms (None: ``dtdpg`` and ``ddpg``)
+    :param env_id: ``compare`` only: the env id (None: ``NomaRadioMap-v0``)
+    :param scenario: ``compare`` only: the scenario (None: the budget's)
     :return: the unique runs
     """
     plan = get_budget(budget)
@@ -57,10 +64,15 @@ def study_specs(
     if experiments is not None:
         raise ValueError("experiments: only the reproduce job has experiments")
     if job == "compare":
-        from sb3_dtdpg.baselines import DEFAULT_ENV_ID
+        from sb3_dtdpg.baselines import DEFAULT_ENV_ID, default_observation_of, is_mission_env
         from sb3_dtdpg.experiments.compare import compare_specs
 
-        return compare_specs(plan, seeds, ["dtdpg", "ddpg"], modes, DEFAULT_ENV_ID, hyperparams, observation)
+        env_id = env_id or DEFAULT_ENV_ID
+        if not is_mission_env(env_id):
+            raise ValueError(f"--env: compare runs on the NomaRadioMap envs, got {env_id}")
+        plan = plan if scenario is None else dataclasses.replace(plan, scenario=scenario)
+        observation = observation or default_observation_of(env_id)
+        return compare_specs(plan, seeds, list(algos or ("dtdpg", "ddpg")), modes, env_id, hyperparams, observation)
     raise ValueError(f"job must be 'reproduce' or 'compare', got {job!r}")
 
 
@@ -130,7 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.set_defaults(error=p.error)
         p.add_argument("--budget", type=cli._budget, default=budget, help=f"budget name (default: {budget}, as for the CLI)")
         cli._add_seeds(p)  # --n-seeds (and the deprecated --seeds)
-        p.add_argument("--preset", choices=cli._PRESETS, default="tuned", help="hyperparameter set (default: tuned)")
+        where = "" if job == "reproduce" else " where every algorithm has it, else paper"
+        preset_help = f"hyperparameter set (default: tuned{where})"
+        p.add_argument("--preset", choices=cli._PRESETS, default="tuned" if job == "reproduce" else None, help=preset_help)
         p.add_argument(
             "--hyperparams",
             choices=cli._PRESETS,
@@ -139,7 +153,23 @@ def build_parser() -> argparse.ArgumentParser:
             replacement="--preset",
             help=argparse.SUPPRESS,
         )
-        p.add_argument("--observation", choices=cli._OBSERVATIONS, default="goal", help="observation (default: goal)")
+        if job == "compare":
+            p.add_argument(
+                "--algos", nargs="+", choices=cli._ALGORITHMS, default=None, help="algorithms (default: dtdpg ddpg)"
+            )
+            p.add_argument(
+                "--env", type=cli._env_id, default=None, help=f"a NomaRadioMap env id (default: {cli._DEFAULT_ENV_ID})"
+            )
+            p.add_argument(
+                "--scenario", type=cli._scenario, default=None, help="scenario name or YAML path (default: the budget's)"
+            )
+        observation = "goal" if job == "reproduce" else None
+        p.add_argument(
+            "--observation",
+            choices=cli._OBSERVATIONS,
+            default=observation,
+            help="observation (default: goal" + ("" if observation else "; paper for the paper task's env id") + ")",
+        )
         p.add_argument(
             "--multiple-access", nargs="+", choices=cli._MODES, default=None, help="downlink modes (default: noma oma)"
         )
@@ -158,18 +188,26 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> None:
+    from sb3_dtdpg import cli
     from sb3_dtdpg.experiments.runs import DamagedRecordError, RunDivergedError, RunMismatchError, check_budget
 
     args = build_parser().parse_args(argv)
+    try:
+        import optuna  # noqa: F401
+    except ModuleNotFoundError:
+        args.error("the workers need the 'zoo' extra (optuna is not installed): pip install -e \".[zoo]\" in your clone")
     try:
         specs = study_specs(
             args.job,
             args.budget,
             args.n_seeds,
-            args.preset,
+            args.preset or cli.default_preset(args.algos or ("dtdpg", "ddpg")),
             args.observation,
             getattr(args, "experiments", None),
             args.multiple_access,
+            getattr(args, "algos", None),
+            getattr(args, "env", None),
+            getattr(args, "scenario", None),
         )
         for spec in specs:
             check_budget(spec)

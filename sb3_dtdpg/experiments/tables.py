@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from sb3_dtdpg.common.files import write_csv, write_text
-from sb3_dtdpg.evaluation import EvaluationResult, mean_ci
+from sb3_dtdpg.evaluation import EvaluationResult, format_ci, mean_ci
 from sb3_dtdpg.experiments.aggregate import iqm, stratified_bootstrap_ci
 
 __all__ = [
@@ -222,23 +222,6 @@ def add_planner_fractions(
 def _add_iqm(row: dict[str, Any], mqi: np.ndarray) -> None:
     row["mqi_iqm"] = iqm(mqi)
     row["mqi_iqm_low"], row["mqi_iqm_high"] = stratified_bootstrap_ci(mqi)
-
-
-def format_ci(value: float | None, half: float | None, digits: int = 1, scale: float = 1.0) -> str:
-    """
-    ``"mean ± half-width"`` for a table cell: ``"-"`` without a value, ``"mean ± n/a"`` when the CI is
-    undefined (e.g. one seed).
-
-    :param value: the mean
-    :param half: the CI half-width
-    :param digits: decimals
-    :param scale: factor applied to both (e.g. 100 for percentages)
-    :return: the cell text
-    """
-    if value is None or not np.isfinite(value):
-        return "-"
-    text = f"{value * scale:.{digits}f}"
-    return text + (f" ± {half * scale:.{digits}f}" if half is not None and np.isfinite(half) else " ± n/a")
 
 
 def _interval(value: float, low: float, high: float, digits: int = 1) -> str:
