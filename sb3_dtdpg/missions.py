@@ -28,7 +28,7 @@ def default_phases(
 ) -> list[Phase]:
     """
     The mission's curriculum of the tuned settings (:func:`sb3_dtdpg.presets.preset` ``"tuned"``): the paper's two
-    phases (Section IV-D), destination training then MQI training, with an early transfer and relabelling.
+    phases (Section IV-E), destination training then MQI training, with an early transfer and relabelling.
 
     OU noise scales are the paper's (0.5 then 0.4, Table I / Section V). The paper gives no final scale;
     we decay linearly to 0.1 and 0.05. Phase 1 ends after ``destination_episodes`` episodes, or earlier

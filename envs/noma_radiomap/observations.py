@@ -25,9 +25,9 @@ OBSERVATIONS: dict[str, int] = {"goal": 9, "destinations": 6, "paper": 3}
 #: The layout of every entry point when none is given (``gymnasium.make``, the CLI, the zoo files, the examples).
 DEFAULT_OBSERVATION = "goal"
 #: Channel gains (dB) mapped onto the observation's [-1, 1]. On the free cells of the built-in scenarios the AP
-#: gain with the expected fading lies in [-96, -46.5] dB (-46.5 dB: LoS at the 2 m antenna offset); Rayleigh
-#: fading moves it by -30 to +8.4 dB at the 0.1 % tails of Exp(1), which the range covers; rarer deep fades
-#: are clipped.
+#: gain with the expected fading lies in [-98.9, -46.5] dB (-46.5 dB: LoS at the 2 m antenna offset); Rayleigh
+#: fading moves it by -27.5 to +10.9 dB from there at the 0.1 % tails of Exp(1), which the range covers; rarer
+#: deep fades are clipped.
 GAIN_DB_RANGE: tuple[float, float] = (-130.0, -30.0)
 #: Distance in metres at which the goal layout's distance feature saturates at 1.
 DISTANCE_SCALE = 10.0

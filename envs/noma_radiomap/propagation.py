@@ -10,7 +10,7 @@ import numpy as np
 
 #: Expected Rayleigh fading in dB, ``E[10 log10 |h|^2]`` with ``|h|^2 ~ Exp(1)`` (paper Eq. (4) and (17)).
 #: For ``X ~ Exp(1)``, ``E[ln X] = -gamma`` (the Euler-Mascheroni constant), hence
-#: ``E[10 log10 X] = -10 gamma / ln 10 = -2.5068 dB`` — the paper's ``E(h)`` of Eq. (Radio.map),
+#: ``E[10 log10 X] = -10 gamma / ln 10 = -2.5068 dB`` — the paper's ``E(h)`` of Eq. (17),
 #: -2.51 dB (docs/MODEL.md).
 EXPECTED_FADING_DB: float = float(-10.0 * np.euler_gamma / np.log(10.0))
 
@@ -119,7 +119,7 @@ def path_gain(path_loss_db: np.ndarray | float, fading_db: float = 0.0) -> np.nd
     """
     Linear channel power gain of links from their path loss, ``g = 10^((-L + F) / 10)``: with ``F = 0`` the
     path gain alone, with ``F =`` :data:`EXPECTED_FADING_DB` the radio-map channel (the paper's Eq.
-    (Radio.map), path loss plus the expected Rayleigh fading ``E(h)``).
+    (17), path loss plus the expected Rayleigh fading ``E(h)``).
 
     :param path_loss_db: path losses ``L`` in dB (see :func:`path_loss_db`), any shape
     :param fading_db: fading ``F`` in dB added to every link
@@ -130,7 +130,7 @@ def path_gain(path_loss_db: np.ndarray | float, fading_db: float = 0.0) -> np.nd
 
 def expected_channel_gain(path_loss_db: np.ndarray | float) -> np.ndarray:
     """
-    The radio-map channel: linear gain with the expected Rayleigh fading (paper Eq. (Radio.map)),
+    The radio-map channel: linear gain with the expected Rayleigh fading (paper Eq. (17)),
     ``g = 10^((-L + E(h)) / 10)``, ``E(h) =`` :data:`EXPECTED_FADING_DB`.
 
     :param path_loss_db: path losses ``L`` in dB, any shape

@@ -3,7 +3,7 @@
 All maps have shape ``(nx, ny)``, are indexed ``[ix, iy]`` and hold values at the cell centres at
 the robots' antenna height. Every link uses the expected Rayleigh fading
 (:data:`~noma_radiomap.propagation.EXPECTED_FADING_DB`), so the maps are the statistical channel
-the paper trains on (its Eq. (Radio.map)).
+the paper trains on (its Eq. (17)).
 """
 
 from __future__ import annotations
