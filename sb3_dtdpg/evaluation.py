@@ -146,9 +146,13 @@ def _make_env(
 ) -> tuple[gym.Env, bool]:
     if isinstance(env_id_or_env, str):
         kwargs = dict(env_kwargs or {})
-        kwargs["channel"] = "rayleigh" if channel is None else channel
-        if multiple_access is not None:
-            kwargs["multiple_access"] = multiple_access
+        for name, wanted in (("channel", channel), ("multiple_access", multiple_access)):
+            given = kwargs.get(name)
+            if wanted is not None and given is not None and given != wanted:
+                raise ValueError(f"{name}={wanted!r} and env_kwargs[{name!r}]={given!r}: give it once")
+            if wanted is not None:
+                kwargs[name] = wanted
+        kwargs.setdefault("channel", "rayleigh")  # the test missions' channel, unless given either way
         return gym.make(env_id_or_env, **kwargs), True
     if not isinstance(env_id_or_env, gym.Env):
         raise ValueError(f"env_id_or_env must be an env id or a gymnasium.Env, got {type(env_id_or_env).__name__}")
@@ -230,8 +234,8 @@ def evaluate(
     :param env_id_or_env: a registered env id (built with ``channel`` and ``multiple_access``) or an env
     :param n_episodes: number of test episodes (the paper uses 20)
     :param seed: episode ``i`` is reset with ``seed + i``, so missions and fading are reproducible and paired
-    :param channel: ``"rayleigh"`` (random fading, the paper's test setting; the default for an env id)
-        or ``"radio_map"``; with an env instance it must be ``None`` or match the env's
+    :param channel: ``"rayleigh"`` (random fading, the paper's test setting; the default for an env id, unless
+        ``env_kwargs`` names one) or ``"radio_map"``; with an env instance it must be ``None`` or match the env's
     :param multiple_access: ``"noma"`` or ``"oma"``; ``None`` keeps the env's
     :param deterministic: passed to ``predict`` (no exploration noise)
     :param options: ``reset`` options (fixed ``starts``/``destinations``), one dict for every episode or one per episode
@@ -247,6 +251,8 @@ def evaluate(
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0 (episode i is reset with seed + i), got {seed!r}")
+    if not isinstance(confidence, (int, float, np.integer, np.floating)) or not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
     if options is not None and not isinstance(options, dict) and len(options) != n_episodes:
         raise ValueError(f"options must be one dict or one per episode ({n_episodes}), got {len(options)} entries")
     kind = _policy_kind(policy)
@@ -257,7 +263,7 @@ def evaluate(
         check_settings(trained_settings(policy), env, f"the {type(policy).__name__} model")
         for episode in range(n_episodes):
             episode_options = options if options is None or isinstance(options, dict) else options[episode]
-            obs, _ = env.reset(seed=seed + episode, options=episode_options)
+            obs, _ = env.reset(seed=int(seed) + episode, options=episode_options)
             if kind == "planner":
                 policy.reset(env.unwrapped)
             path = [robot_positions(env)]
@@ -277,7 +283,7 @@ def evaluate(
             trajectory = np.stack(path)
             destinations = np.asarray(env.unwrapped.destinations)
             result.episodes.append(
-                _episode_record(episode, seed + episode, info, steps, episode_return, trajectory, destinations)
+                _episode_record(episode, int(seed) + episode, info, steps, episode_return, trajectory, destinations)
             )
             if return_trajectories:
                 result.trajectories.append(trajectory)

@@ -137,6 +137,22 @@ def test_summary_and_records_are_consistent():
     assert f"MQI {one.summary()['mqi']:.1f} ± n/a," in repr(one)  # one episode has no CI, as in the tables
 
 
+def test_the_channel_given_in_env_kwargs_is_the_channel_evaluated():
+    small = {"scenario": "small"}
+    by_argument = evaluate(ShortestPathPlanner(), "NomaRadioMap-v0", n_episodes=3, channel="radio_map", env_kwargs=small)
+    by_kwargs = evaluate(ShortestPathPlanner(), "NomaRadioMap-v0", n_episodes=3, env_kwargs={**small, "channel": "radio_map"})
+    rayleigh = evaluate(ShortestPathPlanner(), "NomaRadioMap-v0", n_episodes=3, env_kwargs=small)  # the default
+    assert by_kwargs.episodes == by_argument.episodes != rayleigh.episodes
+    with pytest.raises(ValueError, match=r"channel='rayleigh' and env_kwargs\['channel'\]='radio_map': give it once"):
+        evaluate(
+            StandStill(), "NomaRadioMap-v0", n_episodes=1, channel="rayleigh", env_kwargs={**small, "channel": "radio_map"}
+        )
+    # numpy integers are seeds too; a confidence level out of range is refused before any episode
+    assert evaluate(StandStill(), "NomaRadioMap-v0", n_episodes=1, seed=np.int64(4), env_kwargs=small).episodes[0]["seed"] == 4
+    with pytest.raises(ValueError, match=r"confidence must be in \(0, 1\), got 2\.0"):
+        evaluate(StandStill(), "NomaRadioMap-v0", n_episodes=1, confidence=2.0, env_kwargs=small)
+
+
 def test_bad_arguments_raise_clear_errors():
     env = gym.make("NomaRadioMap-v0", scenario="small", channel="radio_map")
     with pytest.raises(ValueError, match=r"channel='rayleigh'.*channel='radio_map'"):

@@ -1,6 +1,7 @@
 """Non-learning references (noma_radiomap.planners): they reach the destinations, and comm-awareness pays."""
 
 import itertools
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -8,7 +9,14 @@ import pytest
 
 import noma_radiomap
 from noma_radiomap.downlink import allocate_power, downlink, in_outage
-from noma_radiomap.planners import CommAwarePlanner, RandomPlanner, ReferencePlanner, ShortestPathPlanner, channel_maps
+from noma_radiomap.planners import (
+    CommAwarePlanner,
+    RandomPlanner,
+    ReferencePlanner,
+    ShortestPathPlanner,
+    channel_maps,
+    mqi_upper_bound,
+)
 from noma_radiomap.propagation import dbm_to_watt
 from sb3_dtdpg.evaluation import evaluate
 
@@ -238,3 +246,76 @@ def test_the_grid_planners_refuse_motion_steps_far_shorter_than_a_cell(tmp_path)
     for planner in (ShortestPathPlanner(), CommAwarePlanner(), ReferencePlanner()):
         with pytest.raises(ValueError, match=r"moves at most 0\.00025 m per step .*less than 1/1,000 of a cell"):
             planner.reset(env.unwrapped)
+
+
+# --- rooms other than the built-in ones -------------------------------------------------------------------------
+def _small(**changes) -> "noma_radiomap.Scenario":
+    data = noma_radiomap.load_scenario("small").to_dict()
+    for path, value in changes.items():  # "robot.arrival_radius" -> data["robot"]["arrival_radius"]
+        *parents, key = path.split(".")
+        target = data
+        for parent in parents:
+            target = target[parent]
+        target[key] = value
+    return noma_radiomap.Scenario.from_dict(data)
+
+
+GRID_PLANNERS = {
+    "shortest": ShortestPathPlanner,
+    "shortest_best": lambda: ShortestPathPlanner(power="best"),
+    "comm_aware": CommAwarePlanner,
+    "best": ReferencePlanner,
+}
+
+
+@pytest.mark.parametrize("name", GRID_PLANNERS)
+def test_planners_reach_an_off_centre_destination_within_a_small_arrival_radius(name):
+    # The last leg from the cell centre before the destination used to be refused (the costs are cell-centred): the
+    # robot stood there for the rest of the episode.
+    env = gym.make("NomaRadioMap-v0", scenario=_small(**{"obstacles": [], "robot.arrival_radius": 0.5}), channel="radio_map")
+    options = {"starts": [[3.75, 4.25], [1.25, 6.25]], "destinations": [[6.49, 4.49], [9.0, 4.0]]}
+    episode = evaluate(GRID_PLANNERS[name](), env, n_episodes=1, options=options).episodes[0]
+    assert episode["success"] and episode["mission_time_0"] < 10
+
+
+@pytest.mark.parametrize("channel", ["radio_map", "rayleigh"])
+@pytest.mark.parametrize("name", ["shortest_best", "best"])
+def test_planners_of_the_best_power_split_work_in_a_room_without_interferers(name, channel):
+    env = gym.make("NomaRadioMap-v0", scenario=_small(interferers=[]), channel=channel)
+    result = evaluate(GRID_PLANNERS[name](), env, n_episodes=2, seed=3)
+    assert all(episode["success"] for episode in result.episodes) and np.isfinite(result.mqi_mean)
+
+
+def test_the_best_planner_reused_across_the_two_tasks_of_a_room_plans_each_anew():
+    # The paper task of a room shares its radio map but not its episode length: candidates cut at one task's
+    # max_steps must not be scored in the other.
+    scenario = _small(**{"mission.max_steps": 8})
+    options = {"starts": [[0.75, 0.75], [0.75, 5.75]], "destinations": [[10.0, 2.0], [9.0, 4.0]]}
+    missions, paper = (gym.make(env_id, scenario=scenario) for env_id in ("NomaRadioMap-v0", "NomaRadioMapPaper-v0"))
+    reused = ReferencePlanner()
+    for env in (paper, missions, paper):
+        mqi = evaluate(reused, env, n_episodes=1, options=options).mqi_mean
+        assert mqi == evaluate(ReferencePlanner(), env, n_episodes=1, options=options).mqi_mean
+
+
+def test_planner_arguments_and_bound_points_are_checked():
+    for make, message in [
+        (lambda: ShortestPathPlanner(lookahead=2.5), "lookahead must be an integer >= 1, got 2.5"),
+        (lambda: ReferencePlanner(lookahead=0), "lookahead must be an integer >= 1, got 0"),
+        (lambda: CommAwarePlanner(levels=2.5), "levels must be an integer >= 2, got 2.5"),
+        (lambda: ReferencePlanner(weights="ab"), "weights must be a sequence of positive finite numbers, got 'ab'"),
+    ]:
+        with pytest.raises(ValueError, match=re.escape(message)):
+            make()
+    env = gym.make("NomaRadioMap-v0", scenario="small").unwrapped
+    env.reset(seed=0)
+    starts, destinations = env.positions.copy(), env.destinations.copy()
+    assert np.isfinite(mqi_upper_bound(env, starts, destinations))
+    for bad, message in [
+        (starts[:1], r"starts: expected one point per robot, shape \(2, 2\), got \(1, 2\)"),
+        (starts.ravel(), r"starts: expected one point per robot, shape \(2, 2\), got \(4,\)"),
+        ([[np.nan, 1.0], [1.0, 1.0]], r"starts\[0\]: \[nan, 1\.0\] is outside the room or in a blocked cell"),
+        ([[1.0, 1.0], [50.0, 1.0]], r"starts\[1\]: \[50\.0, 1\.0\] is outside the room or in a blocked cell"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            mqi_upper_bound(env, bad, destinations)

@@ -139,6 +139,13 @@ class RandomPlanner:
         return self.rng.uniform(space.low, space.high).astype(space.dtype)
 
 
+def _check_count(name: str, value: Any, low: int) -> int:
+    """:return: ``value`` as an int; :raises ValueError: unless it is an integer >= ``low``, naming it"""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
 class GridPlanner:
     """
     Base of the path-following planners: plan on the occupancy grid, follow the path at full speed,
@@ -155,9 +162,7 @@ class GridPlanner:
     """
 
     def __init__(self, lookahead: int = 8) -> None:
-        if lookahead < 1:
-            raise ValueError(f"lookahead must be >= 1, got {lookahead!r}")
-        self.lookahead = lookahead
+        self.lookahead = _check_count("lookahead", lookahead, 1)
         self._paths: list[tuple[np.ndarray, np.ndarray]] = []
         self._expected: np.ndarray | None = None
         # The radio map and mode the fields and costs were built for (the map itself, not its id, which a later map
@@ -256,6 +261,10 @@ class GridPlanner:
             if self._clear(position, points[j]) and self._chord_cost(env, position, points[j]) <= here - cost_to_go[j] + slack:
                 best = j
                 break
+        if best == 0 and len(points) > 1 and np.allclose(points[0], position, atol=1e-6):
+            # Standing on the point aimed at (the cell centre before an off-centre destination, whose last leg the
+            # cell-centred costs overrate): aiming at it again would keep the robot there for good
+            best = 1
         # Points before the one aimed at are behind the robot now.
         self._paths[u] = (points[best:], cost_to_go[best:])
         target = points[best]
@@ -328,9 +337,7 @@ class CommAwarePlanner(GridPlanner):
 
     def __init__(self, levels: int | None = None, lookahead: int = 8) -> None:
         super().__init__(lookahead)
-        if levels is not None and levels < 2:
-            raise ValueError(f"levels must be >= 2, got {levels!r}")
-        self.levels = levels
+        self.levels = None if levels is None else _check_count("levels", levels, 2)
 
     def _setup(self, env: Any) -> None:
         if self._stale(env):
@@ -676,6 +683,23 @@ def _geodesic_steps(env: Any, start: np.ndarray, destination: np.ndarray) -> int
     return int(np.ceil(length / (scenario.robot.v_max * scenario.mission.time_step) - 1e-9))
 
 
+def _free_points(env: Any, name: str, points: Any) -> np.ndarray:
+    """:return: one point per robot as a float array (U, 2); :raises ValueError: else, or for a point off the floor"""
+    try:
+        array = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        array = np.empty(0)
+    n_robots = env.scenario.n_robots
+    if array.shape != (n_robots, 2):
+        raise ValueError(f"{name}: expected one point per robot, shape ({n_robots}, 2), got {np.shape(points)}")
+    room = env.scenario.room
+    free = room.contains(array)  # NaN is outside
+    free[free] = ~env.radio_map.blocked[room.cell_index(array[free])]
+    for u in np.flatnonzero(~free):
+        raise ValueError(f"{name}[{u}]: {array[u].tolist()} is outside the room or in a blocked cell")
+    return array
+
+
 def mqi_upper_bound(env: Any, starts: np.ndarray, destinations: np.ndarray) -> float:
     """
     An upper bound on the MQI of any policy on one mission, on the radio-map channel: a relaxation in which
@@ -691,7 +715,9 @@ def mqi_upper_bound(env: Any, starts: np.ndarray, destinations: np.ndarray) -> f
     :param starts: start points (U, 2)
     :param destinations: destinations (U, 2)
     :return: the bound
+    :raises ValueError: a point array of another shape, or a point outside the room or in a blocked cell
     """
+    starts, destinations = _free_points(env, "starts", starts), _free_points(env, "destinations", destinations)
     scenario, radio_map = env.scenario, env.radio_map
     mission = scenario.mission
     outage, _ = single_outage_maps(env)
@@ -784,11 +810,15 @@ class ReferencePlanner:
     """
 
     def __init__(self, weights: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0), lookahead: int = 8) -> None:
-        if not weights or any(not np.isfinite(w) or w <= 0 for w in weights):
-            raise ValueError(f"weights must be positive and finite, got {weights!r}")
+        numbers = isinstance(weights, (tuple, list)) and all(
+            isinstance(w, (int, float, np.integer, np.floating)) and not isinstance(w, bool) for w in weights
+        )
+        if not numbers or not weights or any(not np.isfinite(w) or w <= 0 for w in weights):
+            raise ValueError(f"weights must be a sequence of positive finite numbers, got {weights!r}")
         self.weights = tuple(float(w) for w in weights)
-        self.lookahead = lookahead
-        self._radio_map: Any = None  # the map the candidates were rolled out on
+        self.lookahead = _check_count("lookahead", lookahead, 1)
+        self._radio_map: Any = None  # the map and scenario (its task: max_steps) the candidates were rolled out on
+        self._scenario: Any = None
         self._plans: dict[tuple[str, bytes], tuple[np.ndarray, np.ndarray, float]] = {}
         self._rollouts: dict[tuple[int, bytes, bytes], list[tuple[np.ndarray, np.ndarray]]] = {}
         self._plan: np.ndarray | None = None
@@ -798,9 +828,9 @@ class ReferencePlanner:
         self.planned_cost = float("nan")
 
     def _setup(self, env: Any) -> None:
-        if env.radio_map is self._radio_map:
+        if env.radio_map is self._radio_map and (env.scenario is self._scenario or env.scenario == self._scenario):
             return
-        self._radio_map, self._plans, self._rollouts = env.radio_map, {}, {}
+        self._radio_map, self._scenario, self._plans, self._rollouts = env.radio_map, env.scenario, {}, {}
         penalty = env.scenario.mission.outage_penalty
         self._followers = [_PathFollower(None, self.lookahead)]
         # The same candidates in both modes (a mode's outage map is a useful proxy in the other one).
@@ -1006,7 +1036,8 @@ def best_power(env: Any, positions: np.ndarray, active: np.ndarray) -> tuple[np.
         radio_map, scenario = env.radio_map, env.scenario
         gain = radio_map.path_gain["ap"][ix, iy]
         powers = dbm_to_watt(np.array([i.power_dbm for i in scenario.interferers], dtype=np.float64))
-        interferer = np.stack([radio_map.path_gain[i.name][ix, iy] for i in scenario.interferers], axis=-1) * powers
-        return rayleigh_power(gain, interferer.reshape(*gain.shape, len(powers)), active, scenario, env.multiple_access)
+        gains = [radio_map.path_gain[i.name][ix, iy] for i in scenario.interferers]
+        interferer = (np.stack(gains, axis=-1) if gains else np.zeros((*gain.shape, 0))) * powers  # none: a room alone
+        return rayleigh_power(gain, interferer, active, scenario, env.multiple_access)
     gain, interference = channel_maps(env)
     return min_outage_power(gain[ix, iy], interference[ix, iy], active, env.scenario, env.multiple_access)
