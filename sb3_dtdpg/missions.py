@@ -65,10 +65,10 @@ def paper_phases(destination_episodes: int = 300) -> list[Phase]:
     """
     The mission's curriculum of the paper's settings (:func:`sb3_dtdpg.presets.preset` ``"paper"``, docs/ZOO.md,
     "The paper's settings"): the two phases of Algorithm 1 with the OU scales of Section V, 0.5 then 0.4, each
-    decayed linearly over its phase. Where the paper is silent: the destination phase lasts
-    ``destination_episodes`` (default 300 of the paper's 500 episodes) with no early transfer, the noise
-    decays to 0.1 and 0.05, the MQI phase's decay spans the remaining 200 episodes, and the replay buffer is
-    kept at the transfer (Algorithm 1 re-uses its memory buffer).
+    decayed linearly. Where the paper is silent: the destination phase lasts ``destination_episodes`` (default
+    300 of the paper's 500 episodes) with no early transfer and its noise decays to 0.1 over the phase; the MQI
+    phase's noise decays to 0.05 over 200 episodes (the rest of the paper's 500, whatever ``destination_episodes``
+    is); the replay buffer is kept at the transfer (Algorithm 1 re-uses its memory buffer).
 
     :param destination_episodes: Episode budget of the destination phase.
     :return: The two phases.
@@ -109,10 +109,11 @@ class MissionLoggerCallback(BaseCallback):
 
     def __init__(self, stats_window_size: int | None = None, verbose: int = 0):
         super().__init__(verbose=verbose)
-        if stats_window_size is not None and (isinstance(stats_window_size, bool) or stats_window_size < 1):
+        window = stats_window_size
+        if window is not None and (isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1):
             raise ValueError(f"stats_window_size must be a positive integer or None, got {stats_window_size!r}")
-        self.stats_window_size = stats_window_size
-        self.successes: deque[bool] = deque(maxlen=stats_window_size or 100)
+        self.stats_window_size = None if window is None else int(window)
+        self.successes: deque[bool] = deque(maxlen=self.stats_window_size or 100)
 
     def _init_callback(self) -> None:
         window = self.stats_window_size or getattr(self.model, "_stats_window_size", 100)

@@ -45,6 +45,14 @@ def _literal(node: ast.AST, text: str) -> Any:
         if any(keyword.arg is None for keyword in node.keywords):
             raise HyperparameterError(f"{text!r}: dict(**...) is not a literal")
         return {keyword.arg: _literal(keyword.value, text) for keyword in node.keywords}
+    if isinstance(node, (ast.List, ast.Tuple)):  # e.g. phases: [dict(...), dict(...)]
+        items = [_literal(item, text) for item in node.elts]
+        return items if isinstance(node, ast.List) else tuple(items)
+    if isinstance(node, ast.Dict) and None not in node.keys:
+        try:
+            return {_literal(key, text): _literal(value, text) for key, value in zip(node.keys, node.values, strict=True)}
+        except TypeError:  # an unhashable key
+            raise HyperparameterError(f"{text!r}: a dict key must be a number, a string or a tuple") from None
     try:
         return ast.literal_eval(node)
     except ValueError:

@@ -49,21 +49,32 @@ def _checked_manager(base: type) -> type:
             kwargs = {key: value for key, value in processed.items() if key != "policy"}
             where = f" (env {self.env_name.gym_id} in {self.config or 'the default config'}, or -params)"
             check_constructor_kwargs(rl_zoo3.ALGOS[self.algo], kwargs, where, extra=ZOO_KEYS, reserved=ZOO_FLAGS)
-            self._check_env_kwargs()
+            self._check_env_kwargs(kwargs.get("phases"), where)
             return (processed, *others)
 
-        def _check_env_kwargs(self) -> None:
-            """Build the env once with the run's env_kwargs: a bad one is an error line before the log folder exists."""
+        def _check_env_kwargs(self, phases: Any, where: str) -> None:
+            """Build the env once with the run's env_kwargs: a bad one, or phases of reward phases the env lacks, is an
+            error line before the log folder exists."""
             import gymnasium as gym
+            from stable_baselines3.common.vec_env import DummyVecEnv
+
+            from sb3_dtdpg.common.phases import check_env_phases, parse_phases
 
             env_kwargs, eval_kwargs = self.env_kwargs or {}, self.eval_env_kwargs or {}
             for kwargs in (env_kwargs, eval_kwargs) if eval_kwargs != env_kwargs else (env_kwargs,):
                 try:
-                    gym.make(self.env_name.gym_id, **kwargs).close()
+                    env = DummyVecEnv([lambda kwargs=kwargs: gym.make(self.env_name.gym_id, **kwargs)])
                 except (ValueError, TypeError) as error:
                     raise HyperparameterError(
                         f"env_kwargs {kwargs!r} (--env-kwargs, --eval-env-kwargs or the file): {error}"
                     ) from None
+                try:
+                    if phases is not None:
+                        check_env_phases(parse_phases(phases), env)
+                except ValueError as error:
+                    raise HyperparameterError(f"phases{where}: {error}") from None
+                finally:
+                    env.close()
 
     return CheckedExperimentManager
 

@@ -79,6 +79,11 @@ def test_user_errors_are_one_line_with_status_2(argv, message, bad_yaml, capsys)
         ("phases:[]", "phases must hold at least one phase"),
         ("n_steps:100000000", "n_steps must be at most buffer_size (200000), got 100000000"),
         ("reinitialize_at_transfer:'no'", "reinitialize_at_transfer must be True or False, got 'no'"),
+        # the reward phases of the env are checked when the model is made (was: a traceback at the first learn())
+        (
+            "phases:[dict(name='dest', n_episodes=2), dict(name='mqi')]",
+            "phase 'dest': reward_phase 'dest' is not a reward phase of the env ['destination', 'mqi', 'combined']",
+        ),
     ],
 )
 def test_train_hyperparameters_the_model_refuses_are_one_line_and_create_nothing(override, message, tmp_path, capsys):

@@ -389,3 +389,40 @@ def test_mission_success_rate_is_rolling():
     logger_cb = MissionLoggerCallback(stats_window_size=3)
     model.learn(5, callback=logger_cb)
     assert list(logger_cb.successes) == [True, True, True]
+
+
+def test_the_episode_that_ends_the_last_phase_is_logged(tmp_path):
+    # The curriculum stops training inside SB3's rollout, which then writes no logs for that step
+    from stable_baselines3.common.logger import configure
+
+    phases = [Phase("destination", n_episodes=2), Phase("mqi", n_episodes=1)]
+    model, curriculum = make_model(DDPG, make_env(), phases)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    learn(model, curriculum, 1000, [MissionLoggerCallback()], log_interval=1)
+    import pandas as pd
+
+    progress = pd.read_csv(tmp_path / "progress.csv")
+    assert model.num_timesteps == 60 and len(progress) == 3 and progress["mission/mqi"].notna().all()
+    assert list(progress["curriculum/episodes_in_phase"]) == [1, 0, 1]  # the transfer's row: after the re-arm
+
+
+def test_the_env_reward_phases_of_the_phases_are_checked_when_the_model_is_made():
+    with pytest.raises(ValueError, match=r"phase 'nope': reward_phase 'nope' is not a reward phase of the env \["):
+        DTDPG("MlpPolicy", make_env(), phases=[Phase("destination", n_episodes=1), Phase("nope")])
+    with pytest.raises(
+        ValueError, match=r"the phases use the env reward phases \['destination', 'mqi'\].*no set_reward_phase"
+    ):
+        DTDPG("MlpPolicy", "Pendulum-v1", phases=two_phases())
+
+
+def test_the_transfer_dip_windows_meet_at_the_transfer(monkeypatch):
+    import pandas as pd
+
+    from sb3_dtdpg.experiments import plots, reproduce
+
+    # Episodes 1-5 trained the destination phase; the row of episode 5 is logged after the transfer (phase 1)
+    curve = pd.Series(np.arange(1.0, 21.0), index=np.arange(1, 21))
+    monkeypatch.setattr(plots, "transfer_episode", lambda log_dir: 5.0)
+    monkeypatch.setattr(plots, "episode_curves", lambda log_dir, tags: {"mission/mqi": curve})
+    dip = reproduce._dip(None, window=3)
+    assert (dip["before"], dip["after"], dip["final"]) == (4.0, 7.0, 19.0)  # episodes 3-5, 6-8, 18-20

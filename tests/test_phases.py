@@ -1,6 +1,8 @@
 import json
 import pickle
+import re
 
+import numpy as np
 import pytest
 import yaml
 
@@ -93,3 +95,32 @@ def test_round_trips():
     assert parse_phases(as_json) == phases
     no_env_phase = Phase("train", reward_phase=None, n_episodes=4)
     assert Phase.from_dict(no_env_phase.to_dict()) == no_env_phase
+
+
+def test_numpy_numbers_are_the_python_numbers_they_hold():
+    phase = Phase("a", n_episodes=np.int64(3), sigma=np.float32(0.25), success_threshold=np.float64(0.5))
+    assert (phase.n_episodes, phase.sigma, phase.success_threshold) == (3, 0.25, 0.5)
+    assert type(phase.n_episodes) is int and type(phase.sigma) is float
+    assert json.loads(json.dumps(phase.to_dict()))["n_episodes"] == 3
+    with pytest.raises(ValueError, match=r"n_episodes must be a positive integer or None, got 2\.5"):
+        Phase("a", n_episodes=np.float64(2.5))
+
+
+def test_mission_logger_window_is_a_positive_integer():
+    from sb3_dtdpg.missions import MissionLoggerCallback
+
+    assert MissionLoggerCallback(stats_window_size=np.int64(5)).stats_window_size == 5
+    for bad in (2.5, "5", 0, True):
+        with pytest.raises(ValueError, match=re.escape(f"stats_window_size must be a positive integer or None, got {bad!r}")):
+            MissionLoggerCallback(stats_window_size=bad)
+
+
+def test_hyperparameter_values_take_lists_of_dict_calls():
+    from sb3_dtdpg.overrides import HyperparameterError, parse_value
+
+    phases = "[dict(name='destination', n_episodes=50, sigma=0.5), dict(name='mqi', sigma=0.4)]"
+    assert parse_value(phases) == [{"name": "destination", "n_episodes": 50, "sigma": 0.5}, {"name": "mqi", "sigma": 0.4}]
+    assert parse_value("{'a': dict(b=(1, 2))}") == {"a": {"b": (1, 2)}}
+    for bad in ("[dict(**x)]", "[print(1)]", "{[1]: 2}"):
+        with pytest.raises(HyperparameterError):
+            parse_value(bad)

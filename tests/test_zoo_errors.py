@@ -27,6 +27,10 @@ def zoo_train(tmp_path, *args):
         ("  learning_starts: 5000\n", "n_timesteps=1000 cannot train: the first gradient step comes after"),
         ("  gamma: 5\n", "or -params): gamma must be a number in [0, 1], got 5"),
         ("  seed: 3\n", "or -params): set it with --seed, not as a hyperparameter"),
+        (
+            "  phases:\n    - {name: dest, n_episodes: 2}\n    - {name: mqi}\n",
+            "phases (env Pendulum-v1 in ",  # an env without reward phases
+        ),
     ],
 )
 def test_a_bad_hyperparameter_file_is_one_error_line(tmp_path, entry, message):

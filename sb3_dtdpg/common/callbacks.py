@@ -11,7 +11,7 @@ from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 from sb3_dtdpg.common.checks import check_folder
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files, safe_name
 from sb3_dtdpg.common.noise import decaying_noise, noise_sigma, rearm_noise
-from sb3_dtdpg.common.phases import Phase, parse_phases
+from sb3_dtdpg.common.phases import Phase, check_env_phases, parse_phases
 
 
 class CurriculumTransferCallback(BaseCallback):
@@ -183,6 +183,7 @@ class CurriculumTransferCallback(BaseCallback):
         if reason is not None:
             continue_training = self._transfer(reason)
         self._record()
+        self._ended_training = not continue_training
         return continue_training
 
     def _on_rollout_end(self) -> None:
@@ -192,6 +193,10 @@ class CurriculumTransferCallback(BaseCallback):
         self._apply_pending_replay()
         if self.phase_index == len(self.phases) - 1 and not self.state["finished"]:
             self._save_checkpoint(self.phase_index)
+        if getattr(self, "_ended_training", False) and self.logger.name_to_value:
+            # The last phase's budget ended training inside SB3's rollout, which then dumps no logs: the figures of
+            # the episodes that ended at that step are written here
+            self.logger.dump(self.num_timesteps)
 
     # ------------------------------------------------------------------ transfer
     def _end_reason(self, phase: Phase, state: dict[str, Any]) -> str | None:
@@ -303,18 +308,9 @@ class CurriculumTransferCallback(BaseCallback):
                 "reinitialize_at_transfer=True needs a model with reinitialize() (e.g. DTDPG), "
                 f"got {type(self.model).__name__}"
             )
+        check_env_phases(self.phases, env)
         reward_phases = sorted({phase.reward_phase for phase in self.phases if phase.reward_phase is not None})
         if reward_phases:
-            if not env.has_attr("set_reward_phase"):
-                raise ValueError(
-                    f"the phases use the env reward phases {reward_phases}, but the env has no set_reward_phase(); "
-                    "for an env without reward phases give the phases reward_phase=None (e.g. single_phase())"
-                )
-            if env.has_attr("REWARD_PHASES"):
-                known = list(env.get_attr("REWARD_PHASES", indices=[0])[0])
-                unknown = [name for name in reward_phases if name not in known]
-                if unknown:
-                    raise ValueError(f"reward_phase {unknown[0]!r} of the phases is not a reward phase of the env {known}")
             for callback in self.eval_callbacks:
                 if not callback.eval_env.has_attr("set_reward_phase"):
                     raise ValueError(

@@ -2,9 +2,11 @@
 
 import dataclasses
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
+
+import numpy as np
 
 ReplayHandling = Literal["keep", "clear", "relabel"]
 REPLAY_HANDLINGS: tuple[str, ...] = ("keep", "clear", "relabel")
@@ -60,6 +62,10 @@ class Phase:
     replay_handling: ReplayHandling = "keep"
 
     def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):  # numpy numbers as the Python numbers they hold (JSON, identities)
+            value = getattr(self, field.name)
+            if isinstance(value, (np.integer, np.floating)):
+                object.__setattr__(self, field.name, value.item())
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"Phase.name must be a non-empty string, got {self.name!r}")
         where = f"Phase {self.name!r}"
@@ -171,6 +177,38 @@ def parse_phases(phases: Iterable[Phase | Mapping[str, Any]]) -> list[Phase]:
     for phase in parsed:
         phase.noise_schedule()  # raises on an incomplete decay schedule
     return parsed
+
+
+def check_reward_phases(phases: Sequence[Phase], known: Sequence[str]) -> None:
+    """
+    :param phases: a curriculum
+    :param known: the env's reward phases (its ``REWARD_PHASES``)
+    :raises ValueError: a phase whose ``reward_phase`` is not one of them, naming the phase and the reward phase
+    """
+    for phase in phases:
+        if phase.reward_phase is not None and phase.reward_phase not in known:
+            raise ValueError(
+                f"phase {phase.name!r}: reward_phase {phase.reward_phase!r} is not a reward phase of the env {list(known)}"
+            )
+
+
+def check_env_phases(phases: Sequence[Phase], env: Any) -> None:
+    """
+    :param phases: a curriculum
+    :param env: the training env (an SB3 ``VecEnv``)
+    :raises ValueError: the phases set reward phases and the env has no ``set_reward_phase``, or one of them is not
+        among the env's ``REWARD_PHASES`` (:func:`check_reward_phases`)
+    """
+    reward_phases = sorted({phase.reward_phase for phase in phases if phase.reward_phase is not None})
+    if not reward_phases:
+        return
+    if not env.has_attr("set_reward_phase"):
+        raise ValueError(
+            f"the phases use the env reward phases {reward_phases}, but the env has no set_reward_phase(); "
+            "for an env without reward phases give the phases reward_phase=None (e.g. single_phase())"
+        )
+    if env.has_attr("REWARD_PHASES"):
+        check_reward_phases(phases, env.get_attr("REWARD_PHASES", indices=[0])[0])
 
 
 def single_phase(

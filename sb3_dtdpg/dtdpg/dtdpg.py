@@ -24,7 +24,7 @@ from sb3_dtdpg.common.checks import (
     check_total_timesteps,
 )
 from sb3_dtdpg.common.noise import decaying_noise
-from sb3_dtdpg.common.phases import Phase, default_curriculum, parse_phases
+from sb3_dtdpg.common.phases import Phase, check_env_phases, default_curriculum, parse_phases
 from sb3_dtdpg.dtdpg.lean import LeanStep
 from sb3_dtdpg.dtdpg.policies import CnnPolicy, DTDPGPolicy, MlpPolicy, MultiInputPolicy
 
@@ -195,6 +195,8 @@ class DTDPG(LeanStep, DDPG):
             if action_noise is not None:  # the user's noise is used as is: the default phases leave it alone
                 self.phases = [dataclasses.replace(p, sigma=None, final_sigma=None, decay_episodes=None) for p in self.phases]
 
+        if self.env is not None:  # refused here, not at the first learn()
+            check_env_phases(self.phases, self.env)
         schedule = self.phases[0].noise_schedule()
         # No env when load() builds the model: the saved action noise is restored afterwards
         if self.action_noise is None and schedule is not None and self.env is not None:

@@ -172,8 +172,9 @@ def _dip(log_dir: Path, window: int = 10) -> dict[str, float]:
     if episode is None or curve is None or curve.empty:
         return {"transfer_episode": math.nan, "before": math.nan, "after": math.nan, "final": math.nan}
     curve = curve.dropna()
-    before = curve[curve.index < episode].tail(window)
-    after = curve[curve.index >= episode].head(window)
+    # ``episode`` is the last episode of the destination phase (its row is logged after the transfer, phase 1)
+    before = curve[curve.index <= episode].tail(window)
+    after = curve[curve.index > episode].head(window)
     return {
         "transfer_episode": episode,
         "before": float(before.mean()) if len(before) else math.nan,
