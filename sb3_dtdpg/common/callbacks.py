@@ -79,6 +79,7 @@ class CurriculumTransferCallback(BaseCallback):
         check_folder("CurriculumTransferCallback", "save_path", save_path)
         self.phases = parse_phases(phases)
         self.eval_callbacks = list(eval_callbacks)
+        self._ended_training = False  # set when the last phase's budget ends training
         self.save_path = None if save_path is None else os.fspath(save_path)
         self.reinitialize_at_transfer = reinitialize_at_transfer
         self._pending_replay: Phase | None = None
@@ -193,7 +194,7 @@ class CurriculumTransferCallback(BaseCallback):
         self._apply_pending_replay()
         if self.phase_index == len(self.phases) - 1 and not self.state["finished"]:
             self._save_checkpoint(self.phase_index)
-        if getattr(self, "_ended_training", False) and self.logger.name_to_value:
+        if self._ended_training and self.logger.name_to_value:
             # The last phase's budget ended training inside SB3's rollout, which then dumps no logs: the figures of
             # the episodes that ended at that step are written here
             self.logger.dump(self.num_timesteps)
