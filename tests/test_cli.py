@@ -86,6 +86,32 @@ def _fake_result(spec, mqi):
     }
 
 
+def test_the_mqi_scale_of_a_run_is_its_tasks_t_total():
+    from sb3_dtdpg.experiments.tables import run_records
+
+    specs = [
+        RunSpec("ddpg", "noma", 0, 3, scenario="small", env_id=env_id)
+        for env_id in ("NomaRadioMap-v0", "NomaRadioMapPaper-v0")
+    ]
+    records = run_records([_fake_result(spec, mqi=50.0) for spec in specs])
+    assert list(records["mqi_scale"]) == [100.0, 1000.0]  # small's t_total; the paper's task: 1000
+
+
+def test_compare_trains_on_the_channel_of_its_env_id():
+    assert {spec.channel for spec in compare_specs(MICRO, 1, env_id="NomaRadioMapReality-v0")} == {"rayleigh"}
+    assert {spec.channel for spec in compare_specs(MICRO, 1)} == {"radio_map"}
+
+
+def test_a_timestep_budget_sizes_the_destination_phase_by_the_episodes_it_holds():
+    # 600 steps of small's 60-step missions hold at least 10 episodes: the MQI phase comes after 6 (was after 300)
+    from sb3_dtdpg.baselines import make_env
+    from sb3_dtdpg.experiments.specs import build_model
+
+    spec = RunSpec("dtdpg", "noma", 0, 500, scenario="small", timesteps=600, hyperparams="paper")
+    env = make_env("dtdpg", spec.env_id, "noma", "radio_map", spec.env_kwargs)
+    assert build_model(spec, env, _init_setup_model=False).phases[0].n_episodes == 6
+
+
 def test_reproduce_skips_finished_runs(tmp_path):
     experiments = reproduce_specs(MICRO, seeds=1)
     unique = list({s.run_id: s for specs in experiments.values() for s in specs}.values())

@@ -42,15 +42,20 @@ def compare_specs(
     episodes: int | None = None,
     tag: str = "",
     eval_before_transfer: bool = False,
-    channel: str = "radio_map",
+    channel: str | None = None,
 ) -> list[RunSpec]:
     """
     :param episodes: training episodes per run (None: the budget's)
     :param tag: run-id suffix of these runs (:attr:`RunSpec.tag`)
     :param eval_before_transfer: also evaluate DT-DPG's network from the end of its first phase
-    :param channel: the training channel (:attr:`RunSpec.channel`)
+    :param channel: the training channel (:attr:`RunSpec.channel`; None: the env id's, ``radio_map`` but for the
+        ``Reality`` ids)
     :return: the runs of a comparison (every algorithm x mode x seed)
     """
+    if channel is None:
+        import gymnasium as gym
+
+        channel = gym.spec(env_id).kwargs.get("channel", "radio_map")
     return [
         budget.run_spec(
             algo,
@@ -305,9 +310,10 @@ def run_compare(
         planner_rows, planner_paths = evaluate_planners(modes, budget, env_id, instances=planner_instances)
         summary = pd.concat([summary, pd.DataFrame(planner_rows)], ignore_index=True)
         summary = tables.add_planner_fractions(summary, BEST_PLANNER, SHORTEST_PATH_PLANNER)
+        trained = "with Rayleigh fading" if specs and specs[0].channel == "rayleigh" else "on the radio map"
         title = (
-            f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes, "
-            f"{budget.eval_episodes} Rayleigh test episodes, {seeds} seed{'s' if seeds != 1 else ''}, "
+            f"DT-DPG vs baselines on {budget.scenario or 'mall'} ({budget.name} budget: {budget.episodes} training episodes "
+            f"{trained}, {budget.eval_episodes} Rayleigh test episodes, {seeds} seed{'s' if seeds != 1 else ''}, "
             f"{hyperparams} hyperparameters, {observation} observation)"
         )
         margins = []  # the room's margins need both modes' planners

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from sb3_dtdpg import env_settings
 from sb3_dtdpg.common.files import atomic_write, json_default, remove_temp_files, write_json
 from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS, Budget, check_budget, get_budget
 from sb3_dtdpg.experiments.pool import RunReport, RunsFailedError, run_in_pool, worker_pool
@@ -405,6 +406,7 @@ def _train_and_record(
         train_s = _train(model, callbacks, total_timesteps, checkpoint is not None, progress_bar)
     except Exception as error:  # not KeyboardInterrupt: an interrupted run keeps its checkpoint
         raise _record_divergence(out, spec, identity, model, error) from error
+    env_settings.record(model)  # every algorithm's zip says what it was trained on (DTDPG's save does it too)
     atomic_write(run_dir / "model.zip", model.save)
     curriculum = getattr(model, "curriculum_state", None)
     if curriculum is not None:

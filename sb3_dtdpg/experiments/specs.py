@@ -51,7 +51,8 @@ class RunSpec:
     :param episodes: training budget in episodes
     :param channel: training channel, ``"radio_map"`` (the paper's method) or ``"rayleigh"`` ("reality")
     :param learning_rate: overrides the algorithm's learning rate (None: its default)
-    :param destination_episodes: DT-DPG's destination-phase budget (None: 60 % of ``episodes``)
+    :param destination_episodes: DT-DPG's destination-phase budget (None: 60 % of ``episodes``, or of the episodes
+        ``timesteps`` holds when every episode runs to the mission's ``max_steps``)
     :param env_id: registered env id
     :param scenario: scenario name or path (None: the env's default)
     :param eval_episodes: number of test episodes
@@ -166,7 +167,10 @@ def build_model(spec: RunSpec, env: Any, **kwargs: Any) -> Any:
 
     destination_episodes = None
     if spec.algo == "dtdpg":
-        destination_episodes = spec.destination_episodes or max(1, round(0.6 * spec.episodes))
+        episodes = spec.episodes
+        if spec.timesteps is not None:  # the episodes the budget holds at least (every one at the mission's longest)
+            episodes = spec.timesteps // int(env.unwrapped.scenario.mission.max_steps)
+        destination_episodes = spec.destination_episodes or max(1, round(0.6 * episodes))
     return make_model(
         spec.algo,
         env,

@@ -42,12 +42,20 @@ _METRICS = ("success_rate", "mqi", "outage_steps", "mission_time")
 PAPER_MQI_SCALE = 1000.0
 
 
-def _mqi_scale(scenario: str | None) -> float:
-    """``t_total`` (the largest possible MQI) of a run's scenario; ``nan`` if it can no longer be loaded."""
+def _mqi_scale(scenario: str | None, env_id: str | None = None) -> float:
+    """``t_total`` (the largest possible MQI) of a run's scenario as its env id's task runs it (the paper's task:
+    1000); ``nan`` if it can no longer be loaded."""
+    import gymnasium as gym
+
     from noma_radiomap import load_scenario
+    from noma_radiomap.core import task_scenario
 
     try:
-        return float(load_scenario(scenario or "mall").mission.t_total)
+        task = gym.spec(env_id).kwargs.get("task", "missions") if env_id else "missions"
+    except gym.error.Error:  # an id no longer registered: the missions task, the default of every id
+        task = "missions"
+    try:
+        return float(task_scenario(load_scenario(scenario or "mall"), task).mission.t_total)
     except (OSError, ValueError, KeyError):
         return math.nan
 
@@ -75,7 +83,7 @@ def run_records(results: Iterable[dict[str, Any]]) -> pd.DataFrame:
                 "tag": spec["tag"],
                 "seed": spec["seed"],
                 **{metric: summary[metric] for metric in _METRICS},
-                "mqi_scale": _mqi_scale(spec.get("scenario")),
+                "mqi_scale": _mqi_scale(spec.get("scenario"), spec.get("env_id")),
                 "train_timesteps": train["timesteps"],
                 "train_wall_s": train["wall_s"],
             }
