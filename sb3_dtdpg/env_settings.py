@@ -7,30 +7,52 @@ the same length (NOMA and OMA) would load silently. :func:`settings_of` reads th
 fills it in; :func:`record` does it for any SB3 model). :func:`check_settings` refuses an env whose settings
 differ, naming the ``gymnasium.make`` keyword arguments to use.
 
+The scenario is recorded by its name, a digest of its content (:func:`scenario_digest`) and, for a scenario read
+from a YAML file other than the built-in of its name, the file's absolute path: two rooms of one name are told
+apart by their digests (a model saved before the digest was recorded is checked by the name alone).
+
 The training channel is recorded but not checked: a model trained on the radio map is tested with Rayleigh
 fading (the paper's protocol). Envs that are not mission envs have no settings and are never refused here.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import functools
+import hashlib
+import json
+import os
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 __all__ = [
     "CHECKED",
     "SETTINGS",
     "EnvSettingsMismatch",
+    "builtin_scenario_digest",
     "check_settings",
+    "describe_scenario",
     "infer_observation",
     "record",
+    "scenario_digest",
     "settings_of",
     "trained_settings",
 ]
 
-#: What is recorded.
-SETTINGS: tuple[str, ...] = ("scenario", "observation", "multiple_access", "channel", "task", "power_mapping")
+#: What is recorded (``scenario_digest``: :func:`scenario_digest` of the scenario; ``scenario_file``: the absolute path
+#: of the YAML file it was read from where it is not the built-in scenario of its name, else None).
+SETTINGS: tuple[str, ...] = (
+    "scenario",
+    "observation",
+    "multiple_access",
+    "channel",
+    "task",
+    "power_mapping",
+    "scenario_digest",
+    "scenario_file",
+)
 #: What must match for a model to be used on an env (the channel may differ: train on the map, test with fading; a
-#: model saved before ``power_mapping`` was recorded is not checked for it).
+#: model saved before ``power_mapping`` was recorded is not checked for it). The scenario is compared by its digest
+#: where both sides have one, else by its name.
 CHECKED: tuple[str, ...] = ("scenario", "observation", "multiple_access", "task", "power_mapping")
 
 
@@ -78,12 +100,56 @@ def _power_mapping_of(env: Any) -> str:
     return "shares" if any(isinstance(layer, PowerShares) for layer in _layers(env)) else "paper"
 
 
+def scenario_digest(scenario: Any) -> str:
+    """
+    :param scenario: a :class:`noma_radiomap.Scenario`, or its ``to_dict()`` mapping (e.g. as a run record stores it)
+    :return: the SHA-256 of its content (every field, the name included; not where it was loaded from), serialised
+        canonically: equal for equal scenarios whether loaded from a file, a built-in or a JSON record
+    """
+    data = scenario if isinstance(scenario, Mapping) else scenario.to_dict()
+    text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=lambda value: value.item())
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@functools.cache
+def builtin_scenario_digest(name: str) -> str | None:
+    """:return: the :func:`scenario_digest` of the built-in scenario ``name``, None where no built-in has that name"""
+    from noma_radiomap import list_scenarios, load_scenario
+
+    return scenario_digest(load_scenario(name)) if name in list_scenarios() else None
+
+
+def _scenario_file(scenario: Any, digest: str) -> str | None:
+    """The absolute path of the YAML file ``scenario`` was read from, None for a built-in one or one of no file."""
+    source = getattr(scenario, "source", None)
+    if not isinstance(source, str) or not os.path.isfile(source):
+        return None
+    # a built-in's source is "<name>.yaml": a file of that name in the working folder is not where it came from
+    return None if digest == builtin_scenario_digest(scenario.name) else os.path.abspath(source)
+
+
+def describe_scenario(settings: Mapping[str, Any]) -> str:
+    """:return: where the recorded scenario comes from and its digest, for messages (empty where nothing tells)"""
+    digest, file = settings.get("scenario_digest"), settings.get("scenario_file")
+    if not digest:
+        return f"from {file}" if file else ""
+    if file:
+        where = f"from {file}"
+    elif digest == builtin_scenario_digest(str(settings.get("scenario"))):
+        where = "the built-in scenario"
+    else:
+        where = "not from a file"
+    return f"{where}, content sha256 {digest[:12]}"
+
+
 def settings_of(env: Any) -> dict[str, Any] | None:
     """
     :param env: a Gymnasium env, an SB3 ``VecEnv`` or :class:`sb3_dtdpg.vec_env.MissionVecEnv` (or None)
     :return: the env's :data:`SETTINGS` (``scenario`` is the scenario's name), or None for an env that is not a
         NomaRadioMap mission env
     """
+    from noma_radiomap import Scenario
+
     if env is None:
         return None
     single = _single_env(env)
@@ -95,6 +161,7 @@ def settings_of(env: Any) -> dict[str, Any] | None:
     if base is None:
         return None
     scenario = base.scenario
+    digest = scenario_digest(scenario) if isinstance(scenario, Scenario) else None
     return {
         "scenario": getattr(scenario, "name", str(scenario)),
         "observation": _observation_of(single),
@@ -102,6 +169,8 @@ def settings_of(env: Any) -> dict[str, Any] | None:
         "channel": getattr(base, "channel", None),
         "task": getattr(base, "task", None),
         "power_mapping": _power_mapping_of(single),
+        "scenario_digest": digest,
+        "scenario_file": None if digest is None else _scenario_file(scenario, digest),
     }
 
 
@@ -145,8 +214,27 @@ def infer_observation(n_values: int, n_robots: int) -> str | None:
 def _make_call(settings: dict[str, Any]) -> str:
     """The ``gymnasium.make`` call of an env with these settings (the paper's power mapping, the default, left out)."""
     shown = {key: settings.get(key) for key in CHECKED if settings.get(key) not in (None, _DEFAULTS.get(key))}
+    if settings.get("scenario_file"):  # a scenario of a file: the file builds it, its name would be the built-in
+        shown["scenario"] = settings["scenario_file"]
     arguments = ", ".join(f"{key}={value!r}" for key, value in shown.items())
     return f'gym.make("NomaRadioMap-v0", {arguments})'
+
+
+def _differs(key: str, recorded: dict[str, Any], actual: dict[str, Any]) -> bool:
+    """Whether a :data:`CHECKED` setting differs: the scenario by its digest where both have one, else by value."""
+    if key == "scenario" and recorded.get("scenario_digest") and actual.get("scenario_digest"):
+        return recorded["scenario_digest"] != actual["scenario_digest"]
+    return recorded.get(key) is not None and recorded.get(key) != actual.get(key)
+
+
+def _difference(key: str, recorded: dict[str, Any], actual: dict[str, Any]) -> str:
+    """A differing setting and both values, for the message (two scenarios of one name: where each comes from)."""
+    if key != "scenario" or recorded.get(key) != actual.get(key):
+        return f"{key}={recorded[key]!r} (the env has {actual.get(key)!r})"
+    return (
+        f"{key}={recorded[key]!r} ({describe_scenario(recorded)}) (the env has {actual.get(key)!r}, "
+        f"{describe_scenario(actual)}: another room of the same name)"
+    )
 
 
 def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the model") -> None:
@@ -160,14 +248,11 @@ def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the m
     actual = settings_of(env)
     if not recorded or actual is None:
         return
-    differences = [
-        f"{key}={recorded[key]!r} (the env has {actual.get(key)!r})"
-        for key in CHECKED
-        if recorded.get(key) is not None and recorded.get(key) != actual.get(key)
-    ]
+    differences = [_difference(key, recorded, actual) for key in CHECKED if _differs(key, recorded, actual)]
     if differences:
+        scenario_option = f"--scenario {recorded['scenario_file']} " if recorded.get("scenario_file") else ""
         raise EnvSettingsMismatch(
             f"{what} was trained with {', '.join(differences)}; build the env with those settings, e.g. "
-            f"{_make_call(recorded)} (sb3-dtdpg: --observation {recorded.get('observation')} "
+            f"{_make_call(recorded)} (sb3-dtdpg: {scenario_option}--observation {recorded.get('observation')} "
             f"--multiple-access {recorded.get('multiple_access')})"
         )

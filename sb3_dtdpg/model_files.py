@@ -4,6 +4,9 @@ A model may come from ``sb3-dtdpg train``/``compare`` (``<out>/runs/<run id>/mod
 ``result.json`` that names the run's settings), from the RL Zoo (``logs/<algo>/<env>_<n>/<env>.zip``) or from
 ``model.save`` in Python. The settings come from, in order: the zip's ``env_settings`` (every DT-DPG model,
 :mod:`sb3_dtdpg.env_settings`), the run's ``result.json``, and the observation length (the layout that has it).
+
+A model trained on a scenario YAML file is tested on that file's scenario (the file it was read from, while it still
+holds the same content), not on the built-in scenario of the same name.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from sb3_dtdpg.env_settings import CHECKED, check_settings
+from sb3_dtdpg.env_settings import CHECKED, builtin_scenario_digest, check_settings, scenario_digest
 from sb3_dtdpg.experiments.storage import RUN_RECORDS
 
 __all__ = ["RUN_RECORDS", "SavedModel", "check_output_file", "read_saved_model"]
@@ -23,7 +26,7 @@ _POLICY_ALGOS = {"DTDPGPolicy": "dtdpg", "TD3Policy": "td3", "SACPolicy": "sac",
 #: The algorithms whose models have a policy class: SB3's DDPG is TD3 with other settings, so it has TD3's policy.
 _POLICY_FAMILIES = {"DTDPGPolicy": ("dtdpg",), "TD3Policy": ("td3", "ddpg"), "SACPolicy": ("sac",), "TQCPolicy": ("tqc",)}
 #: The fields of a run record's ``spec`` that :func:`read_saved_model` reads (each a string, or null).
-_SPEC_FIELDS = ("algo", "scenario", "observation", "multiple_access", "channel", "task", "env_id")
+_SPEC_FIELDS = ("algo", "scenario", "observation", "multiple_access", "channel", "task", "env_id", "power_mapping")
 
 
 class SavedModel:
@@ -58,16 +61,55 @@ class SavedModel:
 
         :param channel: ``"radio_map"`` or ``"rayleigh"``
         :param overrides: settings to use instead of the recorded ones (None: the recorded one)
-        :return: the keyword arguments (``channel`` first; settings neither recorded nor given are left out)
+        :return: the keyword arguments (``channel`` first; settings neither recorded nor given are left out; the
+            scenario is the recorded file's path where the model was trained on a scenario file other than the
+            built-in of its name)
+        :raises ValueError: the model was trained on a scenario of a file that no longer holds it (changed, moved),
+            or of no file, and no ``scenario`` override is given
         """
         settings = self.settings or {}
         kwargs: dict[str, Any] = {"channel": channel}
         for key in CHECKED:  # the settings that shape the env (the channel is the caller's)
             value = overrides.get(key)
-            value = settings.get(key) if value is None else value
+            if value is None:
+                value = self._recorded_scenario() if key == "scenario" else settings.get(key)
             if value is not None:
                 kwargs[key] = value
         return kwargs
+
+    def _recorded_scenario(self) -> str | None:
+        """
+        The ``scenario`` argument that builds the recorded scenario: its built-in name, or the file it was read from.
+
+        :return: the name or the path (None: none recorded)
+        :raises ValueError: naming the scenario, its file and what became of it, when neither builds it
+        """
+        from noma_radiomap import load_scenario
+
+        settings = self.settings or {}
+        name, digest, file = settings.get("scenario"), settings.get("scenario_digest"), settings.get("scenario_file")
+        if not digest:  # a model saved before the digest was recorded: its name, as then (or a run's unreadable file)
+            return name if name is not None else file
+        if name is not None and builtin_scenario_digest(str(name)) == digest:
+            return str(name)
+        recorded = f"content sha256 {digest[:12]}, recorded in {self.source}"
+        if not file:
+            raise ValueError(
+                f"the model {self.path} was trained on a scenario {name!r} of its own ({recorded}), not the built-in "
+                f"scenario of that name and not read from a file; give --scenario with a YAML file of that scenario"
+            )
+        try:
+            current = scenario_digest(load_scenario(Path(file)))
+        except ValueError as error:
+            problem = f"cannot be loaded now ({error})"
+        else:
+            if current == digest:
+                return str(file)
+            problem = f"holds another scenario now (content sha256 {current[:12]})"
+        raise ValueError(
+            f"the model {self.path} was trained on scenario {name!r} from {file} ({recorded}), but that file {problem}; "
+            "give --scenario with a YAML file of the scenario it was trained on"
+        )
 
     def load(self, env: Any) -> Any:
         """:return: the model, loaded onto ``env`` after checking the env's settings against the recorded ones"""
@@ -119,17 +161,24 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
         raise ValueError(f"{path}: not a Stable-Baselines3 model file ({type(error).__name__}: {error})") from None
     data = data or {}
     result_file = path.parent / "result.json"
-    spec = _run_spec(result_file) if result_file.is_file() else {}
+    spec, content = _run_spec(result_file) if result_file.is_file() else ({}, None)
     policy_class = getattr(data.get("policy_class"), "__name__", "")
     algo = _algorithm(path, data, policy_class, spec, result_file, algo)
     settings, source = data.get("env_settings"), "the model file"
+    if settings is not None and spec and not settings.get("scenario_digest"):
+        # saved before the scenario's content was recorded: its run record tells which room of that name it was
+        known = _spec_scenario(spec.get("scenario") or "mall", content)
+        if known.get("scenario_digest") and known.get("scenario") == settings.get("scenario"):
+            settings = {**settings, "scenario_digest": known["scenario_digest"], "scenario_file": known["scenario_file"]}
+            source = f"the model file and {result_file}"
     if settings is None and spec:
         settings = {
-            "scenario": spec.get("scenario") or "mall",
+            **_spec_scenario(spec.get("scenario") or "mall", content),
             "observation": spec.get("observation", "paper"),
             "multiple_access": spec.get("multiple_access"),
             "channel": spec.get("channel"),
             "task": spec.get("task") or _task_of(spec.get("env_id")),
+            "power_mapping": spec.get("power_mapping"),  # None: a run recorded before power mappings, not checked
         }
         source = str(result_file)
     if settings is None:
@@ -183,20 +232,44 @@ def _algorithm(
     return recorded
 
 
-def _run_spec(result_file: Path) -> dict[str, Any]:
+def _spec_scenario(given: str, content: Any) -> dict[str, Any]:
+    """
+    The scenario settings of a run whose model records none, like :func:`sb3_dtdpg.env_settings.settings_of`'s.
+
+    :param given: the run's ``spec.scenario``: a built-in name or a YAML path
+    :param content: the scenario the run trained on, as its record's ``identity.scenario`` stores it (None: not stored)
+    :return: ``scenario`` (a built-in name: it alone, as before; a file: the scenario's name, None where neither the
+        record nor the file tells), ``scenario_digest`` and ``scenario_file``
+    """
+    from noma_radiomap import list_scenarios, load_scenario
+
+    if given in list_scenarios():
+        return {"scenario": given}
+    file = os.path.abspath(given)
+    if isinstance(content, dict) and isinstance(content.get("name"), str):  # the content trained on, even if edited since
+        return {"scenario": content["name"], "scenario_digest": scenario_digest(content), "scenario_file": file}
+    try:
+        scenario = load_scenario(Path(given))
+    except ValueError:  # gone: the test env's gymnasium.make names the file, unless --scenario is given
+        return {"scenario": None, "scenario_file": file}
+    return {"scenario": scenario.name, "scenario_digest": scenario_digest(scenario), "scenario_file": file}
+
+
+def _run_spec(result_file: Path) -> tuple[dict[str, Any], Any]:
     """
     The ``spec`` of a run's record beside a model (``train``/``compare``/``reproduce`` write ``result.json``).
 
     A JSON object without a ``spec`` is not a run record (e.g. a file of the user's) and is ignored.
 
     :param result_file: the ``result.json`` beside the model
-    :return: its ``spec`` (empty: none)
+    :return: its ``spec`` (empty: none) and the scenario its ``identity`` stores (None: none)
     :raises ValueError: naming the file and what is wrong: not JSON, not a JSON object, a ``spec`` that is not an
         object, or a field of it that cannot be a setting (:data:`_SPEC_FIELDS`)
     """
     import gymnasium as gym
 
     import noma_radiomap  # noqa: F401  (registers the env ids)
+    from noma_radiomap.registration import POWER_MAPPINGS
     from sb3_dtdpg.baselines import ALGORITHMS
 
     def damaged(reason: str) -> ValueError:
@@ -225,7 +298,10 @@ def _run_spec(result_file: Path) -> dict[str, Any]:
             gym.spec(spec["env_id"])
         except gym.error.Error:
             raise damaged(f"has spec.env_id = {spec['env_id']!r}, not a registered env id") from None
-    return spec
+    if spec.get("power_mapping") is not None and spec["power_mapping"] not in POWER_MAPPINGS:
+        raise damaged(f"has spec.power_mapping = {spec['power_mapping']!r}, expected one of {', '.join(POWER_MAPPINGS)}")
+    identity = record.get("identity")
+    return spec, identity.get("scenario") if isinstance(identity, dict) else None
 
 
 def check_output_file(option: str, value: str | Path, model: str | Path) -> None:

@@ -10,10 +10,10 @@ import pytest
 from PIL import Image
 from stable_baselines3 import DDPG
 
-import noma_radiomap  # noqa: F401
+import noma_radiomap
 from sb3_dtdpg import DTDPG
 from sb3_dtdpg.cli import main
-from sb3_dtdpg.env_settings import EnvSettingsMismatch, record, settings_of
+from sb3_dtdpg.env_settings import EnvSettingsMismatch, record, scenario_digest, settings_of
 from sb3_dtdpg.vec_env import make_mission_vec_env
 
 
@@ -42,6 +42,8 @@ def test_settings_of_the_envs():
         "channel": "radio_map",
         "task": "missions",
         "power_mapping": "paper",
+        "scenario_digest": scenario_digest(noma_radiomap.load_scenario("small")),
+        "scenario_file": None,  # a built-in scenario: no file of its own
     }
     assert settings_of(small_env(observation="paper"))["observation"] == "paper"
     assert settings_of(small_env(power_mapping="shares"))["power_mapping"] == "shares"
@@ -330,8 +332,9 @@ def test_an_algo_of_the_policy_family_is_honoured(tmp_path):
         ('{"spec": {"algo": "ppo"}}', "has spec.algo = 'ppo', expected one of dtdpg"),
         ('{"spec": {"env_id": "Nope-v0"}}', "has spec.env_id = 'Nope-v0', not a registered env id"),
         ('{"spec": {"algo": "sac"}}', "records algo 'sac', but the model"),
+        ('{"spec": {"power_mapping": "watts"}}', "has spec.power_mapping = 'watts', expected one of paper, shares"),
     ],
-    ids=["truncated", "empty", "list", "spec_str", "scenario_int", "unknown_algo", "unknown_env", "other_algo"],
+    ids=["truncated", "empty", "list", "spec_str", "scenario_int", "unknown_algo", "unknown_env", "other_algo", "mapping"],
 )
 @pytest.mark.parametrize("command", ["evaluate", "enjoy"])
 def test_a_damaged_run_record_beside_the_model_is_one_error_line_naming_it(run_folder, capsys, content, problem, command):
@@ -414,3 +417,140 @@ def test_a_replay_buffer_of_another_observation_layout_is_refused_and_the_models
     twin = DTDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario="small", observation="goal"), **tiny)
     twin.load_replay_buffer(tmp_path / "buffer.pkl")
     assert twin.replay_buffer.pos == 20
+
+
+# ------------------------------------------------------------------------------------ models of scenario files
+
+
+def scenario_file(folder, name="small", ap_dbm=5.0, interferer_dbm=40.0):
+    """The built-in `small` room with a weaker AP and a louder interferer, under ``name``, as a YAML file."""
+    import yaml
+
+    data = noma_radiomap.load_scenario("small").to_dict()
+    data["name"], data["ap"]["max_power_dbm"], data["interferers"][0]["power_dbm"] = name, ap_dbm, interferer_dbm
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{name}_{ap_dbm:g}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.mark.parametrize("name", ["small", "mysmall"])
+def test_a_model_of_a_scenario_file_is_tested_on_that_file_and_refused_on_another_room(tmp_path, capsys, name):
+    from sb3_dtdpg.evaluation import evaluate
+    from sb3_dtdpg.model_files import read_saved_model
+
+    room = scenario_file(tmp_path, name)
+    path = tmp_path / "model.zip"
+    DTDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario=str(room), observation="goal"), seed=0).save(path)
+    recorded = DTDPG.load(path).env_settings
+    assert (recorded["scenario"], recorded["scenario_file"]) == (name, str(room))
+    assert recorded["scenario_digest"] == scenario_digest(noma_radiomap.load_scenario(str(room)))
+    assert read_saved_model(path).env_kwargs("rayleigh")["scenario"] == str(room)  # the file, not the built-in
+    # the built-in `small` is another room: refused, naming both (the room's file and digest where the names agree)
+    with pytest.raises(EnvSettingsMismatch) as error:
+        evaluate(DTDPG.load(path), small_env(observation="goal"), n_episodes=1)
+    if name == "small":
+        assert f"scenario='small' (from {room}, content sha256 {recorded['scenario_digest'][:12]})" in str(error.value)
+        assert "(the env has 'small', the built-in scenario, content sha256" in str(error.value)
+        assert "another room of the same name" in str(error.value)
+    else:
+        assert "scenario='mysmall' (the env has 'small')" in str(error.value)
+    assert f"scenario={str(room)!r}" in str(error.value) and f"--scenario {room}" in str(error.value)
+    # evaluate tests it on its file
+    out = tmp_path / "eval.json"
+    assert main(["evaluate", str(path), "--n-episodes", "1", "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["settings"]["scenario"] == str(room)
+    capsys.readouterr()
+    code, printed = run_cli(["evaluate", str(path), "--n-episodes", "1", "--scenario", "small"], capsys)
+    assert_one_error_line(code, printed, "evaluate", f"scenario='{name}' ", "(the env has 'small'", f"--scenario {room}")
+
+
+def test_a_model_of_a_scenario_file_changed_or_gone_since_says_so(tmp_path, capsys):
+    import shutil
+
+    from sb3_dtdpg.model_files import read_saved_model
+
+    room = scenario_file(tmp_path)
+    path = tmp_path / "model.zip"
+    DTDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario=str(room), observation="goal"), seed=0).save(path)
+    shutil.copy(room, tmp_path / "kept.yaml")
+    room.write_text(scenario_file(tmp_path / "other", ap_dbm=7.0).read_text())  # edited since: another room
+    with pytest.raises(ValueError, match=f"from {re.escape(str(room))} .*but that file holds another scenario now"):
+        read_saved_model(path).env_kwargs("rayleigh")
+    room.unlink()
+    code, printed = run_cli(["enjoy", str(path)], capsys)
+    assert_one_error_line(
+        code, printed, "enjoy", f"{room} (content sha256", "but that file cannot be loaded now", "--scenario"
+    )
+    # a copy of the room it trained in is that room
+    kwargs = read_saved_model(path).env_kwargs("rayleigh", scenario=str(tmp_path / "kept.yaml"))
+    read_saved_model(path).load(gym.make("NomaRadioMap-v0", **kwargs))
+
+
+def test_a_model_saved_before_the_scenario_digest_is_read_and_checked_by_name_as_before(tmp_path):
+    from sb3_dtdpg.model_files import read_saved_model
+
+    room = scenario_file(tmp_path)
+    model = DDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario=str(room), observation="goal"), learning_starts=10)
+    record(model)
+    for key in ("scenario_digest", "scenario_file"):
+        del model.env_settings[key]  # as saved before they were recorded
+    model.save(tmp_path / "old.zip")
+    saved = read_saved_model(tmp_path / "old.zip")
+    assert saved.env_kwargs("rayleigh")["scenario"] == "small"  # the name: as before
+    saved.load(small_env(observation="goal"))
+    saved.load(gym.make("NomaRadioMap-v0", scenario=str(room), observation="goal"))
+    # beside its run record, the record's scenario content tells the room of that name it trained in
+    run = tmp_path / "runs" / "ddpg_noma_s0_goal"
+    run.mkdir(parents=True)
+    (tmp_path / "old.zip").rename(run / "model.zip")
+    spec = {"algo": "ddpg", "scenario": str(room), "observation": "goal", "multiple_access": "noma"}
+    identity = {"spec": spec, "scenario": noma_radiomap.load_scenario(str(room)).to_dict()}
+    (run / "result.json").write_text(json.dumps({"identity": identity, "spec": spec}))
+    saved = read_saved_model(run)
+    assert saved.env_kwargs("rayleigh")["scenario"] == str(room) and "result.json" in saved.source
+    with pytest.raises(EnvSettingsMismatch, match="another room of the same name"):
+        saved.load(small_env(observation="goal"))
+
+
+def test_a_runs_record_gives_its_power_mapping_and_its_scenario_file(tmp_path):
+    from sb3_dtdpg.model_files import read_saved_model
+
+    room = scenario_file(tmp_path)
+    run = tmp_path / "runs" / "ddpg_noma_s0_goal_shares"
+    run.mkdir(parents=True)
+    trained_env = gym.make("NomaRadioMap-v0", scenario=str(room), observation="goal", power_mapping="shares")
+    DDPG("MlpPolicy", trained_env, learning_starts=10).save(run / "model.zip")  # no settings in the zip
+    spec = {"algo": "ddpg", "scenario": str(room), "observation": "goal", "multiple_access": "noma"}
+    spec["power_mapping"] = "shares"
+    (run / "result.json").write_text(json.dumps({"spec": spec}))  # no scenario content: read from the file
+    saved = read_saved_model(run)
+    assert saved.settings["power_mapping"] == "shares" and saved.settings["scenario"] == "small"
+    kwargs = saved.env_kwargs("rayleigh")
+    assert (kwargs["power_mapping"], kwargs["scenario"]) == ("shares", str(room))
+    saved.load(gym.make("NomaRadioMap-v0", **kwargs))  # its own settings, compared like for like
+    with pytest.raises(EnvSettingsMismatch, match="power_mapping='shares'"):
+        saved.load(gym.make("NomaRadioMap-v0", **{**kwargs, "power_mapping": "paper"}))
+    with pytest.raises(EnvSettingsMismatch, match="another room of the same name"):
+        saved.load(gym.make("NomaRadioMap-v0", **{**kwargs, "scenario": "small"}))
+    # the content the record stores is the room it trained in, whatever became of the file since
+    identity = {"spec": spec, "scenario": noma_radiomap.load_scenario(str(room)).to_dict()}
+    (run / "result.json").write_text(json.dumps({"identity": identity, "spec": spec}))
+    room.write_text(scenario_file(tmp_path / "other", ap_dbm=7.0).read_text())
+    with pytest.raises(ValueError, match="holds another scenario now"):
+        read_saved_model(run).env_kwargs("rayleigh")
+    # a record from before power mappings were recorded: not checked, the default env
+    del spec["power_mapping"]
+    (run / "result.json").write_text(json.dumps({"spec": {**spec, "scenario": "small"}}))
+    assert "power_mapping" not in read_saved_model(run).env_kwargs("rayleigh")
+
+
+def test_the_scenario_digest_is_the_same_from_a_scenario_and_from_its_run_record():
+    from sb3_dtdpg.experiments.specs import RunSpec, run_identity
+
+    scenario = noma_radiomap.load_scenario("small")
+    assert scenario_digest(scenario) == scenario_digest(
+        run_identity(RunSpec("dtdpg", "noma", 0, 2, scenario="small"))["scenario"]
+    )
+    assert scenario_digest(scenario) == scenario_digest(scenario.with_resolution(scenario.room.resolution))
+    assert scenario_digest(scenario) != scenario_digest(noma_radiomap.load_scenario("mall"))
