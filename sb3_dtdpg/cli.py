@@ -414,14 +414,13 @@ def _check_finished_runs(args: argparse.Namespace, specs: Sequence[Any]) -> None
     :param specs: the job's runs (:func:`sb3_dtdpg.experiments.reproduce.reproduce_specs`)
     :raises ValueError: no run of ``specs`` has a result in ``--out``
     """
-    from sb3_dtdpg.experiments.storage import result_path
+    from sb3_dtdpg.experiments.reproduce import check_finished_runs
 
-    if not any(result_path(args.out, spec).is_file() for spec in specs):
-        n_runs = len({spec.run_id for spec in specs})
-        raise ValueError(
-            f"--out: {args.out} holds no finished runs of this job (none of its {n_runs} runs: --budget {args.budget}, "
-            f"--preset {args.hyperparams}, --observation {args.observation}); run it without --report-only to train them"
-        )
+    job = f"--budget {args.budget}, --preset {args.hyperparams}, --observation {args.observation}"
+    try:
+        check_finished_runs(args.out, specs, job, "run it without --report-only to train them")
+    except ValueError as error:
+        raise ValueError(f"--out: {error}") from None
 
 
 def _run_reproduce(args: argparse.Namespace) -> None:

@@ -161,7 +161,9 @@ def settings_of(env: Any) -> dict[str, Any] | None:
     if base is None:
         return None
     scenario = base.scenario
-    digest = scenario_digest(scenario) if isinstance(scenario, Scenario) else None
+    # the digest of the scenario as loaded (its radio map's): the paper's task runs it with another mission length
+    loaded = getattr(getattr(base, "radio_map", None), "scenario", scenario)
+    digest = scenario_digest(loaded) if isinstance(loaded, Scenario) else None
     return {
         "scenario": getattr(scenario, "name", str(scenario)),
         "observation": _observation_of(single),

@@ -399,6 +399,7 @@ def test_the_episode_that_ends_the_last_phase_is_logged(tmp_path):
     model, curriculum = make_model(DDPG, make_env(), phases)
     model.set_logger(configure(str(tmp_path), ["csv"]))
     learn(model, curriculum, 1000, [MissionLoggerCallback()], log_interval=1)
+    model.logger.close()
     import pandas as pd
 
     progress = pd.read_csv(tmp_path / "progress.csv")

@@ -115,6 +115,14 @@ def test_load_with_other_returns_rebuilds_the_buffer_the_model_picked(tmp_path):
     assert (loaded.gamma, loaded.replay_buffer.gamma, loaded.replay_buffer.n_steps) == (0.5, 0.5, 3)
     assert DTDPG.load(tmp_path / "model", env=_pendulum(), n_steps=5).replay_buffer.n_steps == 5
     assert type(DTDPG.load(tmp_path / "model", env=_pendulum(), n_steps=1).replay_buffer) is ReplayBuffer
+    # a zip saved before the buffer followed the returns keeps its buffer's, and says so
+    model._buffer_follows_returns = False  # as such a zip loads
+    model.save(tmp_path / "older")
+    with (
+        pytest.warns(UserWarning, match=r"the replay buffer of .*older.* keeps n_steps=3 .*pass replay_buffer_kwargs"),
+        pytest.warns(UserWarning, match="`n_steps=5` is ignored"),  # SB3's own
+    ):
+        assert DTDPG.load(tmp_path / "older", env=_pendulum(), n_steps=5).replay_buffer.n_steps == 3
     # a buffer the user chose stays as given
     given = DTDPG("MlpPolicy", _pendulum(), replay_buffer_class=ReplayBuffer, **TINY)
     given.save(tmp_path / "given")

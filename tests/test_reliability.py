@@ -150,7 +150,9 @@ def test_a_second_job_on_a_busy_folder_is_refused(tmp_path):
 
 
 def test_report_only_of_a_folder_without_finished_runs_is_refused_and_creates_nothing(tmp_path):
-    with pytest.raises(ValueError, match=r"holds no finished runs of this job \(budget '_micro', 1 seeds.*train=True"):
+    with pytest.raises(
+        ValueError, match=r"holds no finished runs of this job \(none of its \d+ runs: budget '_micro', 1 seeds.*train=True"
+    ):
         run_reproduce(tmp_path / "none", budget="_micro", seeds=1, progress=False, train=False)
     assert not (tmp_path / "none").exists()
 

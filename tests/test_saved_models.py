@@ -2,6 +2,7 @@
 
 import json
 import re
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -554,3 +555,23 @@ def test_the_scenario_digest_is_the_same_from_a_scenario_and_from_its_run_record
     )
     assert scenario_digest(scenario) == scenario_digest(scenario.with_resolution(scenario.room.resolution))
     assert scenario_digest(scenario) != scenario_digest(noma_radiomap.load_scenario("mall"))
+
+
+@pytest.mark.parametrize("scenario", ["small", "file"])
+def test_a_paper_task_model_is_tested_on_its_room(tmp_path, scenario):
+    # The paper's task runs its scenario with another mission length: the recorded digest is of the room as loaded
+    from sb3_dtdpg.model_files import read_saved_model
+
+    if scenario == "file":
+        scenario = tmp_path / "room.yaml"
+        builtin = Path(noma_radiomap.__file__).parent / "scenarios" / "small.yaml"
+        scenario.write_text(builtin.read_text().replace("max_power_dbm: 20.0", "max_power_dbm: 15.0"))
+    env = gym.make("NomaRadioMapPaper-v0", scenario=str(scenario))
+    DTDPG("MlpPolicy", env, learning_starts=10, batch_size=8, policy_kwargs={"net_arch": [8]}).save(tmp_path / "model")
+    kwargs = read_saved_model(tmp_path / "model.zip").env_kwargs("rayleigh")
+    assert kwargs["scenario"] == str(scenario) and kwargs["task"] == "paper"
+    test_env = gym.make("NomaRadioMap-v0", **kwargs)  # the env evaluate builds
+    assert (
+        read_saved_model(tmp_path / "model.zip").load(test_env).env_settings["scenario_digest"]
+        == settings_of(env)["scenario_digest"]
+    )

@@ -1,4 +1,5 @@
 import dataclasses
+import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
@@ -389,6 +390,13 @@ class DTDPG(LeanStep, DDPG):
             env_settings.check_settings(data.get("env_settings"), env, f"the model {path}")
         # a model saved before its buffer choice was recorded keeps its buffer (the constructor's flag would stand)
         kwargs.setdefault("_buffer_follows_returns", data.get("_buffer_follows_returns", False))
+        saved = data.get("replay_buffer_kwargs") or {}
+        kept = [f"{k}={saved[k]!r}" for k in ("n_steps", "gamma") if k in saved and kwargs.get(k, saved[k]) != saved[k]]
+        if not kwargs["_buffer_follows_returns"] and "replay_buffer_kwargs" not in kwargs and kept:
+            warnings.warn(
+                f"DTDPG.load: the replay buffer of {path} keeps {', '.join(kept)} (a model saved before its buffer "
+                "followed the model's returns, or a buffer class given by hand): pass replay_buffer_kwargs to change them"
+            )
         return super().load(path, env=env, device=device, custom_objects=custom_objects, **kwargs)
 
 

@@ -266,16 +266,28 @@ def _check_arguments(
         raise ValueError(f"multiple_access: unknown {modes}, expected some of ['noma', 'oma']")
 
 
+def check_finished_runs(out: str | Path, specs: Sequence[RunSpec], job: str, instead: str) -> None:
+    """
+    A report of a job draws its tables from the finished runs in ``out``: refuse a folder (missing or not) that
+    holds none of the job's, before anything is created.
+
+    :param out: the output folder
+    :param specs: the job's runs
+    :param job: the settings that name the job, for the message
+    :param instead: what to do instead, for the message
+    :raises ValueError: no run of ``specs`` has a result in ``out``
+    """
+    if not any(result_path(out, spec).is_file() for spec in specs):
+        n_runs = len({spec.run_id for spec in specs})
+        raise ValueError(f"{out} holds no finished runs of this job (none of its {n_runs} runs: {job}); {instead}")
+
+
 def _check_report_only(train: bool, out: Path, budget: Budget, seeds: int, hyperparams: str, observation: str) -> None:
-    """:raises ValueError: not ``train`` and ``out`` holds no finished run of the job (a report of nothing: blanks)"""
-    if train:
-        return
-    specs = reproduce_specs(budget, seeds, hyperparams, observation).values()
-    if not any(result_path(out, spec).is_file() for group in specs for spec in group):
-        raise ValueError(
-            f"{out} holds no finished runs of this job (budget {budget.name!r}, {seeds} seeds, hyperparams "
-            f"{hyperparams!r}, observation {observation!r}): train them first (train=True)"
-        )
+    """:raises ValueError: not ``train`` and ``out`` holds no finished run of the job (:func:`check_finished_runs`)"""
+    if not train:
+        specs = [spec for group in reproduce_specs(budget, seeds, hyperparams, observation).values() for spec in group]
+        job = f"budget {budget.name!r}, {seeds} seeds, hyperparams {hyperparams!r}, observation {observation!r}"
+        check_finished_runs(out, specs, job, "train them first (train=True)")
 
 
 def run_reproduce(
