@@ -156,6 +156,25 @@ def check_constructor_kwargs(
             parse_phases(kwargs["phases"])
     except ValueError as error:
         raise HyperparameterError(f"{error}{where}" if "phases" in str(error) else str(error)) from None
+    _check_batch_norm_batch(algo_class, kwargs, where)
+
+
+def _check_batch_norm_batch(algo_class: type, kwargs: Mapping[str, Any], where: str) -> None:
+    """A batch of one with the batch-norm policy (its ``actor_norm`` / ``critic_norm``, ``"batch"`` by default) has no
+    variance: refused here, before the model is built (the constructor refuses it once its networks exist)."""
+    batch_size = kwargs.get("batch_size")
+    policy = getattr(algo_class, "policy_aliases", {}).get("MlpPolicy")
+    if batch_size is None or not _is_number(batch_size) or batch_size >= 2 or policy is None:
+        return
+    norms = inspect.signature(policy).parameters
+    policy_kwargs = kwargs.get("policy_kwargs") or {}
+    if any(
+        name in norms and policy_kwargs.get(name, norms[name].default) == "batch" for name in ("actor_norm", "critic_norm")
+    ):
+        raise HyperparameterError(
+            f"{algo_class.__name__}{where}: batch_size must be at least 2 with batch normalisation (actor_norm or "
+            f"critic_norm 'batch'), got {batch_size!r}"
+        )
 
 
 def _is_number(value: Any) -> bool:

@@ -218,6 +218,30 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
                 )
             self.trial_id = _TrialNumber(self.trial_id)
 
+    def load_trial(self, storage: str, study_name: str, trial_id: int | None = None, convert: bool = True) -> dict[str, Any]:
+        """The zoo's ``load_trial``, its failures named in one error line: a missing ``.log`` storage (the zoo made an
+        empty one), a study that is not there, a trial number that is not one of the study's."""
+        if storage.endswith(".log") and not Path(storage).is_file():
+            raise ZooOptionError(f"--storage {storage}: no such JournalFile (the .log file of an earlier search)")
+        if trial_id is not None and trial_id < 0:
+            raise ZooOptionError(f"--trial-id must be a trial number >= 0, got {int(trial_id)}")
+        try:
+            return super().load_trial(storage, study_name, trial_id, convert)
+        except KeyError:
+            raise ZooOptionError(f"--study-name {study_name!r}: no such study in --storage {storage}") from None
+        except IndexError:
+            n_trials = len(optuna.load_study(storage=self._optuna_storage(storage), study_name=study_name).trials)
+            raise ZooOptionError(
+                f"--trial-id {int(trial_id)}: the study {study_name!r} has {n_trials} trials (numbers 0 to {n_trials - 1})"
+            ) from None
+
+    @staticmethod
+    def _optuna_storage(storage: str) -> Any:
+        """The storage as the zoo opens it (a ``.log`` path: a JournalFile)."""
+        if storage.endswith(".log"):
+            return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(storage))
+        return storage
+
     def read_hyperparameters(self) -> tuple[dict[str, Any], dict[str, Any]]:
         # The zoo replaces the file's env_kwargs by --env-kwargs when both exist: hide ours from it, then merge.
         cli_env_kwargs, self.env_kwargs = self.env_kwargs, {}
@@ -254,6 +278,35 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
         if self.algo == ALGO_NAME and not self.optimize_hyperparameters:
             hyperparams.setdefault("curriculum_save_path", self.save_path)
         return (hyperparams, *others)
+
+    def hyperparameters_optimization(self) -> None:
+        """The zoo's search; for ``dtdpg`` only on an env with reward phases (the sampler builds the mission's two)."""
+        if self.algo == ALGO_NAME:
+            import gymnasium as gym
+
+            env = gym.make(self.env_name.gym_id, **(self.env_kwargs or {}))
+            has_phases = hasattr(env.unwrapped, "set_reward_phase")
+            env.close()
+            if not has_phases:
+                raise ZooOptionError(
+                    f"-optimize with --algo dtdpg samples the mission's two reward phases (destination, mqi), and "
+                    f"{self.env_name.gym_id} has no reward phases: search on a NomaRadioMap env"
+                )
+        super().hyperparameters_optimization()
+
+    def _save_config(self, saved_hyperparams: dict[str, Any]) -> None:
+        # The zoo's enjoy lets args.yml's env_kwargs replace config.yml's: args.yml gets the merged ones
+        if getattr(self.args, "env_kwargs", None) is not None:
+            self.args.env_kwargs = dict(self.env_kwargs)
+        super()._save_config(saved_hyperparams)
+
+    def setup_experiment(self) -> tuple[Any, dict[str, Any]] | None:
+        """The zoo's set-up, the env settings recorded in the new model: every zip saved during training (the
+        ``EvalCallback``'s ``best_model.zip``, the checkpoints) says what it trains on, for every algorithm."""
+        experiment = super().setup_experiment()
+        if experiment is not None:
+            record(experiment[0])
+        return experiment
 
     def save_trained_model(self, model: Any) -> None:
         """Save as the zoo does, with the env settings recorded for every algorithm (DTDPG's ``save`` does it too)."""

@@ -79,6 +79,7 @@ def test_user_errors_are_one_line_with_status_2(argv, message, bad_yaml, capsys)
         ("phases:[]", "phases must hold at least one phase"),
         ("n_steps:100000000", "n_steps must be at most buffer_size (200000), got 100000000"),
         ("reinitialize_at_transfer:'no'", "reinitialize_at_transfer must be True or False, got 'no'"),
+        ("batch_size:1", "batch_size must be at least 2 with batch normalisation (actor_norm or critic_norm 'batch'), got 1"),
         # the reward phases of the env are checked when the model is made (was: a traceback at the first learn())
         (
             "phases:[dict(name='dest', n_episodes=2), dict(name='mqi')]",

@@ -211,6 +211,17 @@ def test_env_kwargs_merge_into_the_config_env_kwargs(tmp_path: Path) -> None:
     assert kwargs(env_kwargs={"reward_phase": "mqi"})[0] == mqi  # the command line wins
     env, evaluation, _ = kwargs(env_kwargs={"multiple_access": "oma"}, eval_env_kwargs={"channel": "rayleigh"})
     assert env == oma and evaluation == {**oma, "channel": "rayleigh"}
+    # args.yml, whose env_kwargs the zoo's enjoy puts in place of config.yml's, holds the merged ones
+    manager = ExperimentManager(
+        argparse.Namespace(env_kwargs={"multiple_access": "oma"}), "ddpg", ENV_ID, str(tmp_path),
+        config=str(CONFIGS / "ddpg.yml"), env_kwargs={"multiple_access": "oma"},
+    )  # fmt: skip
+    manager.read_hyperparameters()
+    manager.params_path = str(tmp_path / "params")
+    os.makedirs(manager.params_path)
+    manager._save_config({})
+    with open(tmp_path / "params" / "args.yml") as f:
+        assert yaml.load(f, Loader=yaml.UnsafeLoader)["env_kwargs"] == oma
 
 
 def test_packaged_configs_are_the_defaults(tmp_path: Path) -> None:
@@ -305,6 +316,9 @@ def test_train_then_enjoy(algo: str, tmp_path: Path) -> None:
     assert type(model) is algo_class
     assert model.num_timesteps == 400
     assert model.env_settings["observation"] == "goal" and model.env_settings["multiple_access"] == "noma"
+    # the zips saved while training (the EvalCallback's best model) record the settings too, for every algorithm
+    best = algo_class.load(run_dir / "best_model.zip", device="cpu")
+    assert best.env_settings == model.env_settings and best.env_settings["scenario"] == "mall"
 
     config = load_config(run_dir)
     with open(CONFIGS / f"{algo}.yml") as f:
@@ -462,3 +476,21 @@ def test_two_workers_share_one_postgresql_study(postgres_url: str, tmp_path: Pat
     study = optuna.load_study(storage=postgres_url, study_name="pg")
     assert sorted(trial.number for trial in study.trials) == [0, 1]
     assert all(trial.state == optuna.trial.TrialState.COMPLETE for trial in study.trials)
+
+
+def test_trial_lookups_that_fail_are_named(journal_study: tuple[Path, str, list[str]], tmp_path: Path) -> None:
+    from sb3_dtdpg.zoo import ZooOptionError
+
+    _, storage, _ = journal_study
+    n_trials = len(load_journal_study(storage, "shared").trials)
+    manager = ExperimentManager(argparse.Namespace(), "dtdpg", ENV_ID, str(tmp_path), storage=storage, study_name="shared")
+    with pytest.raises(ZooOptionError, match=f"--trial-id 99: the study 'shared' has {n_trials} trials"):
+        manager.load_trial(storage, "shared", 99)
+    with pytest.raises(ZooOptionError, match="--study-name 'nosuch': no such study in --storage"):
+        manager.load_trial(storage, "nosuch", 0)
+    with pytest.raises(ZooOptionError, match="--trial-id must be a trial number >= 0, got -1"):
+        manager.load_trial(storage, "shared", -1)
+    missing = tmp_path / "none.log"
+    with pytest.raises(ZooOptionError, match="no such JournalFile"):
+        manager.load_trial(str(missing), "shared", 0)
+    assert not missing.exists()  # the zoo's own lookup made an empty one

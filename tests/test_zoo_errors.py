@@ -27,6 +27,7 @@ def zoo_train(tmp_path, *args):
         ("  learning_starts: 5000\n", "n_timesteps=1000 cannot train: the first gradient step comes after"),
         ("  gamma: 5\n", "or -params): gamma must be a number in [0, 1], got 5"),
         ("  seed: 3\n", "or -params): set it with --seed, not as a hyperparameter"),
+        ("  batch_size: 1\n", "batch_size must be at least 2 with batch normalisation"),
         (
             "  phases:\n    - {name: dest, n_episodes: 2}\n    - {name: mqi}\n",
             "phases (env Pendulum-v1 in ",  # an env without reward phases
@@ -79,3 +80,10 @@ def test_one_torch_thread_unless_the_command_sets_it(argv, expected):
     from sb3_dtdpg.train import with_default_threads
 
     assert with_default_threads(argv) == expected
+
+
+def test_a_dtdpg_search_on_an_env_without_reward_phases_is_one_error_line(tmp_path):
+    done = zoo_train(tmp_path, "-n", "300", "-params", "learning_starts:50", "-optimize", "--n-trials", "1")
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    errors = [line for line in done.stderr.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and "Pendulum-v1 has no reward phases: search on a NomaRadioMap env" in errors[0]
