@@ -156,9 +156,11 @@ def _cmd_map(args: argparse.Namespace) -> int:
 
     scenario = load_scenario(args.scenario)
     out = Path(args.out)
+    path = out / f"maps_{safe_name(scenario.name)}.png"  # the name is user text: never a path
+    if path.is_dir():
+        args.error(f"--out: {str(path)!r} is a folder, where the figure of scenario {scenario.name!r} goes")
     out.mkdir(parents=True, exist_ok=True)
     radio_map = RadioMap.for_scenario(scenario)
-    path = out / f"maps_{safe_name(scenario.name)}.png"  # the name is user text: never a path
     save_and_close(radio_map.plot_maps(), path)
     print(f"wrote {path} (outage share with full power to one robot: {100 * radio_map.outage_share():.1f} % of free cells)")
     return 0
@@ -653,7 +655,10 @@ def _output_file(suffixes: tuple[str, ...]) -> Any:
 
 
 def _output_folder(value: str) -> str:
-    """An output folder: it may not exist yet, but no part of its path may be a file."""
+    """An output folder: it may not exist yet, but no part of its path may be a file (nor may it be empty: the
+    current folder is written as ``.``)."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError(f"expected a folder, got {value!r} (write . for the current folder)")
     _check_no_file_on_the_way(value, Path(value))
     return value
 

@@ -92,6 +92,12 @@ def test_a_folder_holding_another_run_of_the_same_id_is_a_user_error(tmp_path, c
     assert result.read_bytes() == stored
 
 
+def test_a_folder_where_the_map_figure_goes_is_refused_before_the_map(tmp_path, capsys):
+    (tmp_path / "maps" / "maps_small.png").mkdir(parents=True)
+    code, printed = run_cli(["map", "--scenario", "small", "--out", str(tmp_path / "maps")], capsys)
+    assert_one_error_line(code, printed, "map", "maps_small.png' is a folder, where the figure of scenario 'small' goes")
+
+
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this platform")
 def test_a_scenario_that_is_a_folder_or_a_fifo_says_so(tmp_path, capsys):
     code, printed = run_cli(["map", "--scenario", str(tmp_path)], capsys)

@@ -138,6 +138,9 @@ def test_out_is_a_folder_everywhere():
         outs = [a for a in sub._actions if "--out" in a.option_strings]
         assert len(outs) == (0 if name in ("evaluate", "enjoy") else 1), name  # those two name their files
         assert all("folder" in out.help for out in outs), name
+        if outs:  # an empty --out would write into the current folder
+            with pytest.raises(SystemExit):
+                sub.parse_args(["--out", ""])
 
 
 def test_reproduce_defaults_to_a_budget_of_minutes():
