@@ -634,11 +634,13 @@ _seed_count = _checked(int, lambda n: 1 <= n <= _MAX_SEEDS, f"a number of seeds 
 
 def _check_no_file_on_the_way(value: str, folder: Path) -> None:
     """:raises argparse.ArgumentTypeError: a file stands where ``folder`` (of the option's ``value``) or a folder above
-    it would be"""
+    it would be, or the nearest folder that exists is not writable (an error before any work, not after it)"""
     for part in (folder, *folder.parents):
         if part.exists():
             if not part.is_dir():
                 raise argparse.ArgumentTypeError(f"{value!r}: {str(part)!r} is a file, expected a folder")
+            if not os.access(part, os.W_OK | os.X_OK):
+                raise argparse.ArgumentTypeError(f"{value!r}: the folder {str(part)!r} is not writable")
             return
 
 

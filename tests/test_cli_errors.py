@@ -92,6 +92,17 @@ def test_a_folder_holding_another_run_of_the_same_id_is_a_user_error(tmp_path, c
     assert result.read_bytes() == stored
 
 
+def test_an_output_in_a_folder_that_is_not_writable_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    # (as root every folder is writable to os.access: the refusal is simulated)
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode: Path(path) != locked and real_access(path, mode))
+    code, printed = run_cli(["map", "--scenario", "small", "--out", str(locked / "maps")], capsys)
+    assert_one_error_line(code, printed, "map", f"the folder {str(locked)!r} is not writable")
+    assert not (locked / "maps").exists()
+
+
 def test_a_folder_where_the_map_figure_goes_is_refused_before_the_map(tmp_path, capsys):
     (tmp_path / "maps" / "maps_small.png").mkdir(parents=True)
     code, printed = run_cli(["map", "--scenario", "small", "--out", str(tmp_path / "maps")], capsys)
