@@ -200,7 +200,8 @@ class MissionCore:
     Gymnasium's ``ResetNeeded``.
 
     :param num_missions: N
-    :param max_episode_steps: the step at which :meth:`step` reports truncation (None: ``max_steps``, at most that)
+    :param max_episode_steps: the step at which :meth:`step` reports truncation (None: ``max_steps``; a larger one is
+        refused, the missions end there)
     """
 
     def __init__(
@@ -239,8 +240,12 @@ class MissionCore:
         self.observation = observation
         self.n_robots = sc.n_robots
         self.max_steps = sc.mission.max_steps
-        limit = self.max_steps if max_episode_steps is None else int(max_episode_steps)
-        self.max_episode_steps = min(limit, self.max_steps)
+        if max_episode_steps is not None and max_episode_steps > self.max_steps:
+            raise ValueError(
+                f"max_episode_steps must be at most mission.max_steps = {self.max_steps} of scenario {sc.name!r} "
+                f"(its missions end there), got {max_episode_steps!r}"
+            )
+        self.max_episode_steps = self.max_steps if max_episode_steps is None else int(max_episode_steps)
         self.motion = GridMotion(
             self.radio_map.blocked,
             sc.room,

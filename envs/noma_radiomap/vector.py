@@ -143,23 +143,6 @@ def check_num_envs(value: Any, name: str = "num_envs") -> None:
         raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
 
 
-def _check_episode_limit(max_episode_steps: int | None, scenario: Scenario) -> None:
-    """
-    Check a truncation length asked for against the scenario's: the env ends every mission at
-    ``mission.max_steps`` (the registered ids' own ``TimeLimit``, the vector env's truncation).
-
-    :param max_episode_steps: the limit asked for (None: none)
-    :param scenario: the env's scenario (that of its task: ``task="paper"`` runs 1000 steps)
-    :raises ValueError: ``max_episode_steps`` is above ``mission.max_steps``, naming both
-    """
-    max_steps = scenario.mission.max_steps
-    if max_episode_steps is not None and max_episode_steps > max_steps:
-        raise ValueError(
-            f"max_episode_steps must be at most mission.max_steps = {max_steps} of scenario {scenario.name!r} "
-            f"(its missions end there), got {max_episode_steps!r}"
-        )
-
-
 class NomaRadioMapVecEnv(VectorEnv):
     """
     ``num_envs`` missions of :class:`~noma_radiomap.NomaRadioMapEnv` stepped at once with array operations
@@ -185,7 +168,7 @@ class NomaRadioMapVecEnv(VectorEnv):
     :param scenario: see :class:`~noma_radiomap.NomaRadioMapEnv` (also ``multiple_access``, ``channel``,
         ``reward_phase``, ``inducing``)
     :param max_episode_steps: truncation length (None: the scenario's ``mission.max_steps``; at most that, a larger
-        one is refused: :func:`_check_episode_limit`)
+        one is refused)
     :param render_mode: only None (render a single env to see a mission)
     :param observation: the observation layout (:mod:`noma_radiomap.observations`; None: ``"goal"``, or
         ``"paper"`` with ``task="paper"``)
@@ -227,7 +210,6 @@ class NomaRadioMapVecEnv(VectorEnv):
             int(num_envs), scenario, multiple_access, channel, reward_phase, inducing, observation, task, max_episode_steps
         )
         core = self.core
-        _check_episode_limit(max_episode_steps, core.scenario)
         self.num_envs = int(num_envs)
         self.render_mode = None
         self.observation = core.observation
