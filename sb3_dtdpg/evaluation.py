@@ -18,6 +18,7 @@ import gymnasium as gym
 import numpy as np
 from scipy import stats
 
+from sb3_dtdpg.common.checks import check_confidence
 from sb3_dtdpg.env_settings import check_settings, trained_settings
 
 __all__ = ["EvaluationResult", "Planner", "evaluate", "format_ci", "mean_ci", "robot_positions"]
@@ -47,8 +48,7 @@ def mean_ci(values: Sequence[float] | np.ndarray, confidence: float = 0.95) -> t
     :return: ``(mean, half_width)``; the half-width is ``nan`` for fewer than two samples
         and 0 when all samples are equal
     """
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+    check_confidence(confidence)
     x = np.asarray(values, dtype=np.float64).ravel()
     if x.size == 0:
         return math.nan, math.nan
@@ -251,8 +251,8 @@ def evaluate(
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0 (episode i is reset with seed + i), got {seed!r}")
-    if not isinstance(confidence, (int, float, np.integer, np.floating)) or not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+    seed = int(seed)  # Gymnasium takes Python integers only
+    check_confidence(confidence)
     if options is not None and not isinstance(options, dict) and len(options) != n_episodes:
         raise ValueError(f"options must be one dict or one per episode ({n_episodes}), got {len(options)} entries")
     kind = _policy_kind(policy)
@@ -263,7 +263,7 @@ def evaluate(
         check_settings(trained_settings(policy), env, f"the {type(policy).__name__} model")
         for episode in range(n_episodes):
             episode_options = options if options is None or isinstance(options, dict) else options[episode]
-            obs, _ = env.reset(seed=int(seed) + episode, options=episode_options)
+            obs, _ = env.reset(seed=seed + episode, options=episode_options)
             if kind == "planner":
                 policy.reset(env.unwrapped)
             path = [robot_positions(env)]
@@ -283,7 +283,7 @@ def evaluate(
             trajectory = np.stack(path)
             destinations = np.asarray(env.unwrapped.destinations)
             result.episodes.append(
-                _episode_record(episode, int(seed) + episode, info, steps, episode_return, trajectory, destinations)
+                _episode_record(episode, seed + episode, info, steps, episode_return, trajectory, destinations)
             )
             if return_trajectories:
                 result.trajectories.append(trajectory)

@@ -124,6 +124,12 @@ def check_switches(owner: str, switches: Mapping[str, Any]) -> None:
             raise ValueError(f"{owner}: {name} must be True or False, got {value!r}")
 
 
+def check_confidence(confidence: Any) -> None:
+    """:raises ValueError: ``confidence`` is not a confidence level in (0, 1), naming the value"""
+    if not _is_real(confidence) or not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+
+
 def check_log_interval(log_interval: Any) -> None:
     """
     :param log_interval: ``learn()``'s episodes between log dumps (None: never)

@@ -26,6 +26,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy import stats
 
+from sb3_dtdpg.common.checks import check_confidence
+
 __all__ = [
     "iqm",
     "performance_profile",
@@ -45,11 +47,6 @@ def iqm(scores: np.ndarray) -> float:
     x = np.asarray(scores, dtype=np.float64).ravel()
     x = x[~np.isnan(x)]
     return float(stats.trim_mean(x, 0.25)) if x.size else float("nan")
-
-
-def _check_confidence(confidence: float) -> None:
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
 
 
 def _pooled_iqm(*columns: np.ndarray, axis: int = -1) -> np.ndarray:
@@ -103,7 +100,7 @@ def stratified_bootstrap_ci(
     :param seed: seed of the resampling (the CI is deterministic for a given seed)
     :return: ``(low, high)``; ``(nan, nan)`` with fewer than two runs
     """
-    _check_confidence(confidence)
+    check_confidence(confidence)
     x = np.asarray(scores, dtype=np.float64)
     x = x.reshape(len(x), -1) if x.ndim else x.reshape(1, 1)
     if x.shape[0] < 2:
@@ -136,7 +133,7 @@ def pointwise_bootstrap_ci(
     if x.shape[0] < 2:
         nan = np.full(x.shape[1], np.nan)
         return nan, nan.copy()
-    _check_confidence(confidence)
+    check_confidence(confidence)
     result = stats.bootstrap(
         (x,),
         np.mean,
@@ -166,7 +163,7 @@ def probability_of_improvement(
     :param seed: seed of the resampling
     :return: ``(probability, low, high)``; the bounds are ``nan`` unless both have at least two runs
     """
-    _check_confidence(confidence)
+    check_confidence(confidence)
     a, b = np.asarray(x, dtype=np.float64).ravel(), np.asarray(y, dtype=np.float64).ravel()
     if a.size == 0 or b.size == 0:
         raise ValueError(f"probability_of_improvement needs scores for both, got {a.size} and {b.size}")
