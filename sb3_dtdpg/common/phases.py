@@ -179,25 +179,12 @@ def parse_phases(phases: Iterable[Phase | Mapping[str, Any]]) -> list[Phase]:
     return parsed
 
 
-def check_reward_phases(phases: Sequence[Phase], known: Sequence[str]) -> None:
-    """
-    :param phases: a curriculum
-    :param known: the env's reward phases (its ``REWARD_PHASES``)
-    :raises ValueError: a phase whose ``reward_phase`` is not one of them, naming the phase and the reward phase
-    """
-    for phase in phases:
-        if phase.reward_phase is not None and phase.reward_phase not in known:
-            raise ValueError(
-                f"phase {phase.name!r}: reward_phase {phase.reward_phase!r} is not a reward phase of the env {list(known)}"
-            )
-
-
 def check_env_phases(phases: Sequence[Phase], env: Any) -> None:
     """
     :param phases: a curriculum
     :param env: the training env (an SB3 ``VecEnv``)
-    :raises ValueError: the phases set reward phases and the env has no ``set_reward_phase``, or one of them is not
-        among the env's ``REWARD_PHASES`` (:func:`check_reward_phases`)
+    :raises ValueError: the phases set reward phases and the env has no ``set_reward_phase``, or a phase's reward phase
+        is not among the env's ``REWARD_PHASES`` (naming the phase and the reward phase)
     """
     reward_phases = sorted({phase.reward_phase for phase in phases if phase.reward_phase is not None})
     if not reward_phases:
@@ -207,8 +194,14 @@ def check_env_phases(phases: Sequence[Phase], env: Any) -> None:
             f"the phases use the env reward phases {reward_phases}, but the env has no set_reward_phase(); "
             "for an env without reward phases give the phases reward_phase=None (e.g. single_phase())"
         )
-    if env.has_attr("REWARD_PHASES"):
-        check_reward_phases(phases, env.get_attr("REWARD_PHASES", indices=[0])[0])
+    if not env.has_attr("REWARD_PHASES"):
+        return
+    known = list(env.get_attr("REWARD_PHASES", indices=[0])[0])
+    for phase in phases:
+        if phase.reward_phase is not None and phase.reward_phase not in known:
+            raise ValueError(
+                f"phase {phase.name!r}: reward_phase {phase.reward_phase!r} is not a reward phase of the env {known}"
+            )
 
 
 def single_phase(
