@@ -345,24 +345,23 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
-    from sb3_dtdpg.baselines import check_hyperparams, default_observation_of, is_mission_env
-    from sb3_dtdpg.experiments.compare import compare_specs
-    from sb3_dtdpg.experiments.runs import BUDGETS, check_budget
+    from sb3_dtdpg.experiments.compare import compare_job
+    from sb3_dtdpg.experiments.runs import check_budget
 
-    if not is_mission_env(args.env):
-        args.error(f"--env: compare runs on the NomaRadioMap envs, got {args.env}")
-    args.observation = args.observation or default_observation_of(args.env)
     args.hyperparams = _hyperparams(args, args.algos)
     with _user_errors(args):
-        for algo in args.algos:
-            check_hyperparams(algo, args.hyperparams)
-        budget = BUDGETS[args.budget]
-        if args.scenario is not None:
-            budget = _replace(budget, scenario=args.scenario)
-        n_seeds = budget.seeds if args.n_seeds is None else args.n_seeds
-        for spec in compare_specs(
-            budget, n_seeds, args.algos, args.multiple_access, args.env, args.hyperparams, args.observation
-        ):
+        job = compare_job(
+            args.budget,
+            args.n_seeds,
+            args.algos,
+            args.multiple_access,
+            args.env,
+            args.scenario,
+            args.hyperparams,
+            args.observation,
+        )
+        args.observation = job.observation
+        for spec in job.specs:
             check_budget(spec)
     with _busy_folder_errors(args):
         return _failed_runs_status(args, _run_compare)
@@ -590,12 +589,6 @@ def _cmd_enjoy(args: argparse.Namespace) -> int:
         print(f"wrote {args.record} ({frames} frame{'s' if frames != 1 else ''})")
     env.close()
     return 0
-
-
-def _replace(budget: Any, **changes: Any) -> Any:
-    import dataclasses
-
-    return dataclasses.replace(budget, **changes)
 
 
 # ---------------------------------------------------------------------------------------------- argument types

@@ -102,6 +102,24 @@ def test_compare_trains_on_the_channel_of_its_env_id():
     assert {spec.channel for spec in compare_specs(MICRO, 1)} == {"radio_map"}
 
 
+def test_the_api_the_cli_and_the_workers_resolve_a_compare_job_alike(tmp_path):
+    # One function resolves a comparison: the env id's observation (the paper task's id: "paper"), the scenario on
+    # the budget, a repeated algorithm once; a non-mission env is refused by run_compare itself, before any folder.
+    from sb3_dtdpg.experiments.compare import compare_job
+    from sb3_dtdpg.experiments.distributed import study_specs
+
+    job = compare_job(MICRO, 1, ["td3", "td3"], ["noma"], "NomaRadioMapPaper-v0", "small", "paper")
+    assert (job.observation, job.budget.scenario, job.modes, job.seeds) == ("paper", "small", ["noma"], 1)
+    assert [(s.algo, s.observation, s.scenario) for s in job.specs] == [("td3", "paper", "small")]
+    assert job.specs == study_specs(
+        "compare", "_micro", 1, "paper", None, None, ["noma"], ["td3"], "NomaRadioMapPaper-v0", "small"
+    )
+    assert compare_job(MICRO, 1).observation == "goal"
+    with pytest.raises(ValueError, match="env: compare runs on the NomaRadioMap envs, got Pendulum-v1"):
+        run_compare(tmp_path / "out", MICRO, env_id="Pendulum-v1")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_timestep_budget_sizes_the_destination_phase_by_the_episodes_it_holds():
     # 600 steps of small's 60-step missions hold at least 10 episodes: the MQI phase comes after 6 (was after 300)
     from sb3_dtdpg.baselines import make_env

@@ -513,7 +513,7 @@ def test_study_worker_takes_the_cli_options_and_defaults(monkeypatch, capsys):
     assert {(s.scenario, s.observation, s.env_id) for s in expected} == {("small", "paper", "NomaRadioMapPaper-v0")}
     with pytest.raises(SystemExit):
         distributed.main(["compare", "--env", "Pendulum-v1", *storage])
-    assert "--env: compare runs on the NomaRadioMap envs, got Pendulum-v1" in capsys.readouterr().err
+    assert "env: compare runs on the NomaRadioMap envs, got Pendulum-v1" in capsys.readouterr().err
 
 
 def test_a_study_worker_without_optuna_names_the_extra_in_one_line(monkeypatch, capsys):

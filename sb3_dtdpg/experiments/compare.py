@@ -11,14 +11,22 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import pandas as pd
 
 from sb3_dtdpg.experiments.budgets import check_seeds
 from sb3_dtdpg.experiments.runs import Budget, RunSpec, get_budget, load_result, output_lock, run_many
 
-__all__ = ["compare_specs", "evaluate_planners", "format_room_margins", "room_margins", "run_compare"]
+__all__ = [
+    "CompareJob",
+    "compare_job",
+    "compare_specs",
+    "evaluate_planners",
+    "format_room_margins",
+    "room_margins",
+    "run_compare",
+]
 
 #: The reference rows of the tables: label -> (class in :mod:`noma_radiomap.planners`, its keyword arguments).
 PLANNERS: dict[str, tuple[str, dict[str, Any]]] = {
@@ -248,6 +256,57 @@ def _check_planners_take(budget: Budget, env_id: str) -> None:
     check_planner_robots(load_scenario(scenario).n_robots, f"compare's reference planners on {scenario}")
 
 
+class CompareJob(NamedTuple):
+    """A comparison's runs and its arguments as resolved by :func:`compare_job`."""
+
+    budget: Budget  #: the budget, with the scenario asked for
+    specs: list[RunSpec]  #: every algorithm x mode x seed
+    seeds: int  #: seeds per configuration
+    modes: list[str]  #: the multiple-access modes, each once
+    observation: str  #: the observation layout
+
+
+def compare_job(
+    budget: str | Budget = "default",
+    seeds: int | None = None,
+    algos: Sequence[str] = ("dtdpg", "ddpg"),
+    modes: Sequence[str] = ("noma", "oma"),
+    env_id: str = "NomaRadioMap-v0",
+    scenario: str | None = None,
+    hyperparams: str = "paper",
+    observation: str | None = None,
+) -> CompareJob:
+    """
+    The runs of a comparison, every argument checked before any run starts: what :func:`run_compare` trains,
+    ``sb3-dtdpg compare`` checks and the distributed workers share out (:mod:`sb3_dtdpg.experiments.distributed`).
+
+    :param budget: a name of :data:`~sb3_dtdpg.experiments.runs.BUDGETS` or a :class:`Budget`
+    :param seeds: seeds per configuration (None: the budget's)
+    :param algos: algorithms (a name given twice is one run per seed)
+    :param modes: multiple-access modes
+    :param env_id: a mission env id
+    :param scenario: scenario name or path (None: the budget's)
+    :param hyperparams: ``"paper"`` or ``"tuned"``
+    :param observation: the observation layout (None: the env id's, :func:`sb3_dtdpg.baselines.default_observation_of`)
+    :return: the job, its arguments resolved
+    :raises ValueError: naming the first bad argument
+    """
+    from sb3_dtdpg.baselines import default_observation_of, is_mission_env
+
+    budget = get_budget(budget)
+    if scenario is not None:
+        budget = dataclasses.replace(budget, scenario=scenario)
+    algos, modes = list(dict.fromkeys(algos)), list(dict.fromkeys(modes))
+    seeds = budget.seeds if seeds is None else seeds
+    if not is_mission_env(env_id):
+        raise ValueError(f"env: compare runs on the NomaRadioMap envs, got {env_id}")
+    observation = observation or default_observation_of(env_id)
+    _check_arguments(algos, modes, hyperparams, observation, seeds)
+    _check_planners_take(budget, env_id)
+    specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams, observation)
+    return CompareJob(budget, specs, seeds, modes, observation)
+
+
 def run_compare(
     out: str | Path = "results/compare",
     budget: str | Budget = "default",
@@ -259,7 +318,7 @@ def run_compare(
     env_id: str = "NomaRadioMap-v0",
     scenario: str | None = None,
     hyperparams: str = "paper",
-    observation: str = "goal",
+    observation: str | None = None,
 ) -> pd.DataFrame:
     """
     Train and evaluate every algorithm x mode x seed (finished runs are kept), then write the tables and figures.
@@ -274,8 +333,8 @@ def run_compare(
     :param env_id: the env id
     :param scenario: scenario name or path (default: the budget's, ``mall`` unless ``tiny``)
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (see :mod:`sb3_dtdpg.baselines`)
-    :param observation: ``"goal"`` (the goal-conditioned layout, the default), ``"destinations"`` or ``"paper"`` (Eq. (24);
-        docs/MODEL.md, "Observations")
+    :param observation: ``"goal"`` (the goal-conditioned layout), ``"destinations"`` or ``"paper"`` (Eq. (24);
+        docs/MODEL.md, "Observations"); None: the env id's (``goal`` but for the paper task's id)
     :return: the summary table (learners and planners)
     :raises ValueError: on a bad argument, or a budget that cannot train an algorithm (before any run starts)
     :raises OutputBusyError: another job is using ``out``
@@ -285,17 +344,12 @@ def run_compare(
     """
     from sb3_dtdpg.experiments import plots, tables
 
-    budget = get_budget(budget)
-    if scenario is not None:
-        budget = dataclasses.replace(budget, scenario=scenario)
-    algos, modes = list(dict.fromkeys(algos)), list(dict.fromkeys(modes))  # a name given twice is one run per seed
-    seeds = budget.seeds if seeds is None else seeds
-    _check_arguments(algos, modes, hyperparams, observation, seeds)
-    _check_planners_take(budget, env_id)
+    budget, specs, seeds, modes, observation = compare_job(
+        budget, seeds, algos, modes, env_id, scenario, hyperparams, observation
+    )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
-        specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams, observation)
         report = run_many(
             specs, out, n_workers=n_workers, progress=progress, on_finish=None if progress else _finished_line(out)
         )

@@ -15,7 +15,6 @@ options on the CLI later find the same runs)::
 """
 
 import argparse
-import dataclasses
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -64,15 +63,11 @@ def study_specs(
     if experiments is not None:
         raise ValueError("experiments: only the reproduce job has experiments")
     if job == "compare":
-        from sb3_dtdpg.baselines import DEFAULT_ENV_ID, default_observation_of, is_mission_env
-        from sb3_dtdpg.experiments.compare import compare_specs
+        from sb3_dtdpg.baselines import DEFAULT_ENV_ID
+        from sb3_dtdpg.experiments.compare import compare_job
 
-        env_id = env_id or DEFAULT_ENV_ID
-        if not is_mission_env(env_id):
-            raise ValueError(f"--env: compare runs on the NomaRadioMap envs, got {env_id}")
-        plan = plan if scenario is None else dataclasses.replace(plan, scenario=scenario)
-        observation = observation or default_observation_of(env_id)
-        return compare_specs(plan, seeds, list(algos or ("dtdpg", "ddpg")), modes, env_id, hyperparams, observation)
+        algos = algos or ("dtdpg", "ddpg")
+        return compare_job(plan, seeds, algos, modes, env_id or DEFAULT_ENV_ID, scenario, hyperparams, observation).specs
     raise ValueError(f"job must be 'reproduce' or 'compare', got {job!r}")
 
 
