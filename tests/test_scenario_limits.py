@@ -500,6 +500,20 @@ def test_the_extremes_of_the_radio_ranges_give_finite_rates(small_dict, multiple
     assert np.isfinite(env.radio_map.sinr_map_db).all()
 
 
+@pytest.mark.parametrize("value", [float("inf"), float("nan"), -5, 0, "lots", None, True])
+def test_a_bad_memory_cap_attribute_is_named(monkeypatch, value):
+    # The attribute set from Python follows the variable's rule (was an OverflowError for inf, a TypeError for None).
+    from noma_radiomap import radiomap
+
+    monkeypatch.delenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", raising=False)
+    monkeypatch.setattr(radiomap, "MAX_MEMORY_BYTES", value)
+    message = rf"^noma_radiomap.radiomap.MAX_MEMORY_BYTES: expected a positive number of bytes, got {re.escape(repr(value))}$"
+    with pytest.raises(ValueError, match=message):
+        load_scenario("small")
+    monkeypatch.setattr(radiomap, "MAX_MEMORY_BYTES", 2e10)  # a float that is a number of bytes is taken
+    assert radiomap.memory_cap() == 20_000_000_000
+
+
 @pytest.mark.parametrize("text", ["inf", "1e400", "-inf", "nan", "abc", "0"])
 def test_a_bad_memory_cap_variable_is_named_without_a_scenario_file(monkeypatch, tmp_path, small_yaml, text):
     monkeypatch.setenv("NOMA_RADIOMAP_MAX_MEMORY_BYTES", text)

@@ -98,14 +98,16 @@ def estimated_memory(scenario: Scenario) -> dict[str, int]:
 def memory_cap() -> int:
     """:return: the cap in bytes, :data:`MAX_MEMORY_BYTES` or ``NOMA_RADIOMAP_MAX_MEMORY_BYTES`` when set"""
     text = os.environ.get(_MEMORY_VARIABLE)
-    if text is None:
-        return int(MAX_MEMORY_BYTES)
+    name, given = (
+        (_MEMORY_VARIABLE, text) if text is not None else ("noma_radiomap.radiomap.MAX_MEMORY_BYTES", MAX_MEMORY_BYTES)
+    )
     try:
-        value = int(float(text))
-    except (ValueError, OverflowError):  # not a number, NaN; inf and 1e400 (float("1e400") is inf)
+        value = -1 if isinstance(given, bool) else int(float(given))
+    except (TypeError, ValueError, OverflowError):  # not a number, NaN; inf and 1e400 (float("1e400") is inf)
         value = -1
     if value <= 0:
-        raise ValueError(f"{_MEMORY_VARIABLE}: expected a positive number of bytes, got {text[:40]!r}")
+        shown = given[:40] if isinstance(given, str) else given
+        raise ValueError(f"{name}: expected a positive number of bytes, got {shown!r}")
     return value
 
 
