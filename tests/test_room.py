@@ -197,3 +197,23 @@ def test_a_room_with_too_many_corners_falls_back_to_the_grid_bound(monkeypatch):
     finally:
         planners._corner_graph.cache_clear()
     assert loose > tight + 10  # the grid relaxation alone: still a bound, a looser one
+
+
+def test_the_tables_gap_is_the_best_planners_distance_from_the_bound_on_the_radio_map(scores, best_planner):
+    # The bound holds on the radio-map channel; the table's planner rows are with fading: the gap is taken where the
+    # bound holds (bound - the planner's radio-map MQI), not against the fading row's MQI.
+    import pandas as pd
+
+    from sb3_dtdpg.experiments.compare import evaluate_planners
+    from sb3_dtdpg.experiments.tables import add_planner_fractions
+
+    rows, _ = evaluate_planners(
+        ("noma", "oma"), get_budget("default"), names=(BEST_PLANNER,), instances={BEST_PLANNER: best_planner}
+    )
+    table = add_planner_fractions(pd.DataFrame(rows), BEST_PLANNER, BEST_PLANNER).set_index("multiple_access")
+    for mode in ("noma", "oma"):
+        on_radio_map = scores["radio_map", mode, BEST_PLANNER].mqi_mean
+        assert table.loc[mode.upper(), "mqi"] == scores["rayleigh", mode, BEST_PLANNER].mqi_mean
+        assert table.loc[mode.upper(), "mqi_radio_map"] == on_radio_map != table.loc[mode.upper(), "mqi"]
+        assert table.loc[mode.upper(), "mqi_gap"] == pytest.approx(table.loc[mode.upper(), "mqi_bound"] - on_radio_map)
+        assert table.loc[mode.upper(), "mqi_gap"] >= 0
