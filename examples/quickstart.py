@@ -7,9 +7,10 @@ Quickstart: train DT-DPG on the NOMA indoor radio-map env, evaluate it, save it,
 The ``tuned`` preset gives DTDPG the measured best settings on the mission (docs/BENCHMARKS.md; the paper's
 Table I is the ``paper`` preset): batch-norm actor and critic, OU noise decaying per episode, and the two-phase
 curriculum ("destination", then "mqi" once the robots reach their destinations in 95 % of the last 20 episodes, or
-after 500 episodes). The env gets the goal-conditioned observation by default (``--observation paper``: the
-paper's state, which learns the mission far more slowly, docs/BENCHMARKS.md "What limits learning"). A small
-budget stays in the first phase.
+after 500 episodes). The env gets its id's observation by default: the goal-conditioned one on the missions of
+``NomaRadioMap-v0`` (``--observation destinations``, positions, destinations and gains without the goal features,
+learns them far more slowly: docs/BENCHMARKS.md "What limits learning"), the paper's state, Eq. (24), on the
+paper's task, ``NomaRadioMapPaper-v0``. A small budget stays in the first phase.
 """
 
 import argparse
@@ -29,9 +30,10 @@ def main() -> None:
     parser.add_argument("--env", default="NomaRadioMap-v0", help="a NomaRadioMap env id")
     parser.add_argument(
         "--observation",
-        default="goal",
+        default=None,
         choices=["goal", "destinations", "paper"],
-        help="goal-conditioned (default), destinations (positions, destinations, gains) or the paper's state",
+        help="goal-conditioned, destinations (positions, destinations, gains) or the paper's state, Eq. (24) "
+        "(default: the env id's, goal on the missions, paper on the paper's task)",
     )
     parser.add_argument("--eval-episodes", type=int, default=5, help="test episodes (Rayleigh fading)")
     parser.add_argument("--seed", type=int, default=0, help="training seed")
@@ -41,16 +43,15 @@ def main() -> None:
     args = parser.parse_args()
     th.set_num_threads(args.threads)
 
-    env = gym.make(args.env, observation=args.observation)
+    env_kwargs = {} if args.observation is None else {"observation": args.observation}
+    env = gym.make(args.env, **env_kwargs)
     model = DTDPG("MlpPolicy", env, seed=args.seed, tensorboard_log=args.tensorboard_log, **preset("tuned"))
     model.learn(args.timesteps, callback=MissionLoggerCallback(), progress_bar=True)
     phase = model.phases[model.curriculum_state["phase_index"]].name
     print(f"trained {model.num_timesteps} steps, {model._episode_num} episodes; curriculum phase: {phase!r}")
 
     # The paper's test protocol: Rayleigh fading, episode i reset with seed + i (the same missions for every policy)
-    result = evaluate(
-        model, args.env, n_episodes=args.eval_episodes, seed=10_000, env_kwargs={"observation": args.observation}
-    )
+    result = evaluate(model, args.env, n_episodes=args.eval_episodes, seed=10_000, env_kwargs=env_kwargs)
     summary = result.summary()
     print(
         f"evaluation ({args.eval_episodes} Rayleigh episodes): success {100 * summary['success_rate']:.0f} %, "
@@ -59,7 +60,7 @@ def main() -> None:
 
     model.save(args.save_path)
     loaded = DTDPG.load(args.save_path, env=env)
-    obs, _ = gym.make(args.env, observation=args.observation).reset(seed=10_000)
+    obs, _ = gym.make(args.env, **env_kwargs).reset(seed=10_000)
     action, _ = loaded.predict(obs, deterministic=True)
     assert np.array_equal(action, model.predict(obs, deterministic=True)[0])
     print(f"saved to {args.save_path}, loaded; first action of a mission: {np.round(action, 3)}")
