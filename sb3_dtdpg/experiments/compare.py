@@ -278,6 +278,7 @@ class CompareJob(NamedTuple):
     budget: Budget  #: the budget, with the scenario asked for
     specs: list[RunSpec]  #: every algorithm x mode x seed
     seeds: int  #: seeds per configuration
+    algos: list[str]  #: the algorithms, each once
     modes: list[str]  #: the multiple-access modes, each once
     observation: str  #: the observation layout
 
@@ -320,7 +321,7 @@ def compare_job(
     _check_arguments(algos, modes, hyperparams, observation, seeds)
     _check_planners_take(budget, env_id)
     specs = compare_specs(budget, seeds, algos, modes, env_id, hyperparams, observation)
-    return CompareJob(budget, specs, seeds, modes, observation)
+    return CompareJob(budget, specs, seeds, algos, modes, observation)
 
 
 def run_compare(
@@ -360,7 +361,7 @@ def run_compare(
     """
     from sb3_dtdpg.experiments import plots, tables
 
-    budget, specs, seeds, modes, observation = compare_job(
+    budget, specs, seeds, algos, modes, observation = compare_job(
         budget, seeds, algos, modes, env_id, scenario, hyperparams, observation
     )
     out = Path(out)
