@@ -158,18 +158,25 @@ def default_config(algo: str, env_id: str) -> Path | None:
 
     :param algo: the zoo's algorithm name (``dtdpg``, ``ddpg``, ...)
     :param env_id: the env id
-    :return: ``<config_dir>/<algo>.yml`` for ``dtdpg`` (the zoo has none), and for the other algorithms when
-        the file has an entry for ``env_id``; None otherwise (the zoo's own default file applies)
+    :return: the first of ``<config_dir>/<algo>.yml`` and ``<config_dir>/<algo>_paper.yml`` (the paper's task:
+        ``NomaRadioMapPaper-v0``, ``NomaRadioMapPaperOMA-v0``) that has an entry for ``env_id``; else
+        ``<algo>.yml`` for ``dtdpg`` (the zoo has none), None for the other algorithms (the zoo's own default
+        file applies)
     """
+    for path in (config_dir() / f"{algo}.yml", config_dir() / f"{algo}_paper.yml"):
+        if path.is_file() and env_id in _config_entries(path):
+            return path
+    path = config_dir() / f"{algo}.yml"
+    return path if algo == ALGO_NAME and path.is_file() else None
+
+
+def _config_entries(path: str | Path) -> dict[str, Any]:
+    """:return: the entries of a YAML hyperparameter file, by env id"""
     import yaml
 
-    path = config_dir() / f"{algo}.yml"
-    if not path.is_file():
-        return None
-    if algo == ALGO_NAME:
-        return path
     with open(path) as f:
-        return path if env_id in (yaml.safe_load(f) or {}) else None
+        entries = yaml.safe_load(f) or {}
+    return entries if isinstance(entries, dict) else {}
 
 
 class _TrialNumber(int):
@@ -185,7 +192,10 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
     for rl_zoo3 2.9:
 
     - Without ``config`` (``--conf-file``), the package's ``zoo_configs/<algo>.yml`` is used (:func:`default_config`):
-      always for ``dtdpg``, for the zoo's algorithms when it has an entry for the env.
+      always for ``dtdpg``, for the zoo's algorithms when it has an entry for the env; ``<algo>_paper.yml`` for the
+      paper's task (``NomaRadioMapPaper-v0``, ``NomaRadioMapPaperOMA-v0``).
+    - A YAML file without an entry for the env id is a :class:`ZooOptionError` that names the file's env ids
+      (the zoo's own error is a traceback).
     - ``env_kwargs`` (``--env-kwargs``) are merged into the ``env_kwargs`` of the hyperparameter file instead of
       replacing them (``--env-kwargs multiple_access:"'oma'"`` keeps the file's ``reward_phase``);
       ``eval_env_kwargs`` (``--eval-env-kwargs``) are merged over the result the same way.
@@ -242,7 +252,22 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
             return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(storage))
         return storage
 
+    def _check_config_entry(self) -> None:
+        """A YAML file without an entry for the env id (nor a ``default`` one): one error line that names the file's
+        env ids, before the log folder exists (the zoo's own "Hyperparameters not found" is a traceback)."""
+        config = str(self.config)
+        if not config.endswith((".yml", ".yaml")) or not Path(config).is_file() or self._is_atari:
+            return
+        entries = _config_entries(config)
+        env_id = self.env_name.gym_id
+        if env_id not in entries and "default" not in entries:
+            raise ZooOptionError(
+                f"--env {env_id}: {config} has no entry for it (its env ids: {', '.join(map(str, entries)) or 'none'}); "
+                f"give one of them with --env, or another --conf-file"
+            )
+
     def read_hyperparameters(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        self._check_config_entry()
         # The zoo replaces the file's env_kwargs by --env-kwargs when both exist: hide ours from it, then merge.
         cli_env_kwargs, self.env_kwargs = self.env_kwargs, {}
         try:

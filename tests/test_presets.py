@@ -119,7 +119,7 @@ def test_table_one_is_one_definition_that_the_cli_python_and_zoo_read(tmp_path):
     manager = ExperimentManager(
         argparse.Namespace(),
         "dtdpg",
-        "NomaRadioMap-v0",
+        "NomaRadioMapPaper-v0",  # the paper file's env ids are the paper task's
         str(tmp_path / "zoo"),
         eval_freq=-1,
         config=str(CONFIGS / "dtdpg_paper.yml"),

@@ -24,7 +24,7 @@ from stable_baselines3 import DDPG  # noqa: E402
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # noqa: E402
 
 import noma_radiomap  # noqa: E402, F401
-from sb3_dtdpg import DTDPG  # noqa: E402
+from sb3_dtdpg import DTDPG, MissionLoggerCallback  # noqa: E402
 from sb3_dtdpg.common.phases import parse_phases  # noqa: E402
 from sb3_dtdpg.zoo import (  # noqa: E402
     NET_ARCHS,
@@ -39,6 +39,7 @@ REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "zoo_configs"
 ENV_ID = "NomaRadioMap-v0"
 NOMA_IDS = ["NomaRadioMap-v0", "NomaRadioMapOMA-v0", "NomaRadioMapReality-v0", "NomaRadioMapOMAReality-v0"]
+PAPER_IDS = ["NomaRadioMapPaper-v0", "NomaRadioMapPaperOMA-v0"]  # the paper's task
 TIMEOUT = 240
 # Tiny budgets: one episode is at most 300 steps, evaluations are one episode
 TINY_PARAMS = ["learning_starts:50", "buffer_size:2000"]
@@ -141,34 +142,37 @@ def enjoy_episode(output: str) -> tuple[float, int]:
 def test_every_config_builds_its_model_for_every_env_id(name: str, tmp_path: Path) -> None:
     register_dtdpg()
     algo = name.removesuffix("_paper")
+    paper_task = name.endswith("_paper")
     with open(CONFIGS / f"{name}.yml") as f:
         entries = yaml.safe_load(f)
-    assert set(NOMA_IDS) <= set(entries)
-    for env_id in NOMA_IDS:
+    env_ids = PAPER_IDS if paper_task else NOMA_IDS
+    assert set(env_ids) <= set(entries)
+    for env_id in env_ids:
         manager = ExperimentManager(
             argparse.Namespace(), algo, env_id, str(tmp_path / "logs"), eval_freq=-1, config=str(CONFIGS / f"{name}.yml")
         )
         model, saved = manager.setup_experiment()
         assert type(model) is rl_zoo3.ALGOS[algo]
-        assert saved["n_timesteps"] == 1.5e5, "every algorithm gets the same budget"
+        # every algorithm gets the same budget: the paper's 500 episodes, of 1000 steps on the paper's task
+        assert saved["n_timesteps"] == (5e5 if paper_task else 1.5e5)
+        assert model.env.get_attr("task") == ["paper" if paper_task else "missions"]
+        # the RL Zoo's `callback` key: every run logs the mission/* scalars
+        assert [type(callback) for callback in manager.callbacks] == [MissionLoggerCallback]
         if algo == "dtdpg":
             assert model.phases == parse_phases(entries[env_id]["phases"])
             assert [phase.reward_phase for phase in model.phases] == ["destination", "mqi"]
             assert model.curriculum_save_path == manager.save_path
         else:
-            assert manager.env_kwargs == {
-                "reward_phase": "combined",
-                **({"task": "paper"} if name.endswith("_paper") else {"observation": "goal"}),
-            }
+            assert manager.env_kwargs == {"reward_phase": "combined", **({} if paper_task else {"observation": "goal"})}
         # every file trains on the goal-conditioned observation (9 values per robot) but the paper's task, whose
         # state is Eq. (24): position and channel gain per robot (3 values)
-        assert model.observation_space.shape == ((6,) if name.endswith("_paper") else (18,))
+        assert model.observation_space.shape == ((6,) if paper_task else (18,))
         model.env.close()
 
 
 def test_paper_config_has_table_one_values() -> None:
     with open(CONFIGS / "dtdpg_paper.yml") as f:
-        entry = yaml.safe_load(f)[ENV_ID]
+        entry = yaml.safe_load(f)["NomaRadioMapPaper-v0"]
     table_one = {"learning_rate": 1e-4, "batch_size": 64, "tau": 0.002, "buffer_size": 50_000, "gamma": 1.0}
     assert {key: entry[key] for key in table_one} == table_one
     assert [phase["sigma"] for phase in entry["phases"]] == [0.5, 0.4]
@@ -233,6 +237,10 @@ def test_packaged_configs_are_the_defaults(tmp_path: Path) -> None:
     assert config_dir() == CONFIGS  # a source checkout
     assert config("dtdpg", ENV_ID) == config("dtdpg", "Pendulum-v1") == str(CONFIGS / "dtdpg.yml")
     assert config("ddpg", "NomaRadioMapOMA-v0") == str(CONFIGS / "ddpg.yml")
+    # the paper's task: the files keyed by its env ids
+    assert config("dtdpg", "NomaRadioMapPaper-v0") == str(CONFIGS / "dtdpg_paper.yml")
+    assert config("ddpg", "NomaRadioMapPaperOMA-v0") == str(CONFIGS / "ddpg_paper.yml")
+    assert Path(config("td3", "NomaRadioMapPaper-v0")).parent == Path(rl_zoo3.__file__).parent / "hyperparams"
     assert Path(config("ddpg", "Pendulum-v1")).parent == Path(rl_zoo3.__file__).parent / "hyperparams"  # the zoo's own
     assert ExperimentManager(argparse.Namespace(), "ddpg", ENV_ID, str(tmp_path), config="my.yml").config == "my.yml"
 
@@ -352,6 +360,25 @@ def test_train_then_enjoy(algo: str, tmp_path: Path) -> None:
     expected_reward, expected_length = replay_episode(model_path, algo_class, config["env_kwargs"], seed=5)
     assert length == expected_length
     assert reward == pytest.approx(expected_reward, abs=0.01)
+
+
+def test_zoo_runs_log_the_mission_scalars(tmp_path: Path) -> None:
+    """The shipped files name the mission logger (the zoo's `callback` key): DDPG and DT-DPG runs of the default files
+    log the same mission/* scalars side by side."""
+    for algo in ("dtdpg", "ddpg"):
+        run_zoo(
+            "train", "--algo", algo, "--env", ENV_ID, "-n", "300", "-params", *TINY_PARAMS,
+            "--env-kwargs", "scenario:'small'", "--eval-freq", "-1", "--seed", "0", "-f", "logs", "-tb", "runs", cwd=tmp_path,
+        )  # fmt: skip
+        assert load_config(tmp_path / "logs" / algo / f"{ENV_ID}_1")["callback"] == "sb3_dtdpg.MissionLoggerCallback"
+    for algo in ("dtdpg", "ddpg"):
+        tb_dir = tmp_path / "runs" / ENV_ID / f"{algo.upper()}_1"
+        # small's missions last at most 60 steps and SB3 dumps every 4 episodes: at least one dump in 300 steps
+        success_rates = scalars(tb_dir, "mission/success_rate")
+        assert success_rates and all(0 <= value <= 1 for _, value in success_rates)
+        assert all(np.isfinite(value) for _, value in scalars(tb_dir, "mission/mqi"))
+        assert all(0 < value <= 60 for _, value in scalars(tb_dir, "mission/mission_time"))
+        assert scalars(tb_dir, "mission/outage_steps")
 
 
 # ----------------------------------------------------------------------------- shared studies

@@ -58,6 +58,22 @@ def test_bad_env_kwargs_are_one_error_line_before_the_log_folder(tmp_path):
     assert not (tmp_path / "logs").exists()
 
 
+@pytest.mark.parametrize(
+    ("env_id", "config", "ids"),
+    [
+        ("NomaRadioMap-v0", "dtdpg_paper.yml", "NomaRadioMapPaper-v0, NomaRadioMapPaperOMA-v0"),  # the paper's task
+        ("NomaRadioMapPaper-v0", "dtdpg.yml", "NomaRadioMap-v0, NomaRadioMapOMA-v0"),
+    ],
+)
+def test_a_file_without_an_entry_for_the_env_id_is_one_error_line(tmp_path, env_id, config, ids):
+    done = zoo_train(tmp_path, "--env", env_id, "--conf-file", str(REPO / "zoo_configs" / config))
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    errors = [line for line in done.stderr.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and f"--env {env_id}: " in errors[0] and f"{config} has no entry for it" in errors[0]
+    assert f"(its env ids: {ids}" in errors[0]
+    assert not (tmp_path / "logs").exists()
+
+
 def test_trial_id_without_storage_is_one_error_line(tmp_path):
     done = zoo_train(tmp_path, "--trial-id", "0")
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
