@@ -270,6 +270,20 @@ def test_curriculum_runs_and_continues_across_learn_calls(tmp_path):
     np.testing.assert_array_equal(model.action_noise.current_sigma, np.full(3, 0.4 + (0.2 - 0.4) * 1 / 5))
 
 
+def test_the_phase_folder_is_not_saved_with_the_model(tmp_path):
+    # A copy of a run's zip must not write phase files into the original run's folder: the folder is given again.
+    phases = [Phase("destination", n_episodes=1, sigma=0.5), Phase("mqi", sigma=0.4)]
+    model = DTDPG("MlpPolicy", _phased(), phases=phases, curriculum_save_path=str(tmp_path / "original"), **TINY)
+    model.save(tmp_path / "copy.zip")
+    loaded = DTDPG.load(tmp_path / "copy.zip", env=_phased())
+    assert loaded.curriculum_save_path is None
+    loaded.learn(30)  # the transfer at step 20 saves nothing
+    assert loaded.curriculum_state["phase_index"] == 1 and not (tmp_path / "original").exists()
+    again = DTDPG.load(tmp_path / "copy.zip", env=_phased(), curriculum_save_path=str(tmp_path / "phases"))
+    again.learn(30)
+    assert os.path.isfile(tmp_path / "phases" / "phase_0_destination.zip")
+
+
 class _ModeRecorder(BaseCallback):
     def _on_step(self) -> bool:
         assert not self.model.policy.actor.training

@@ -305,6 +305,7 @@ def test_train_writes_checkpoints_and_resumes(tmp_path, monkeypatch, capsys, alg
     assert result["train"]["timesteps"] > checkpoint["timesteps"]
     if algo == "dtdpg":
         assert result["curriculum_state"]["phase_index"] == 1  # the transfer after episode 2 carried over
+        assert (run_dir / "phase_1_mqi.zip").is_file()  # the resumed model saves its phase in the run's folder
     assert not stale.exists() and not (run_dir / "checkpoint.json").exists() and not (run_dir / "checkpoints").exists()
     # Finished: the same command returns the result; other settings in the same folder are refused.
     assert main(argv) == 0

@@ -100,6 +100,8 @@ class DTDPG(LeanStep, DDPG):
         when it offers one, else a single phase that leaves the reward alone.
     :param curriculum_save_path: Folder where the model is saved at the end of each phase
         (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved. An existing file there is refused.
+        Not saved with the model (a copy of a run would write into the original's folder): give it to
+        :meth:`load` again to keep saving the phases.
     :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
         them over (ablation of the transfer, :meth:`reinitialize`)
     :param lean: Train and act with the lean step (:mod:`sb3_dtdpg.dtdpg.lean`): SB3's TD3/DDPG update and
@@ -348,6 +350,9 @@ class DTDPG(LeanStep, DDPG):
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
         env_settings.check_settings(getattr(self, "env_settings", None), env)
         super().set_env(env, force_reset=force_reset)
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "curriculum_save_path"]
 
     def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
         """

@@ -180,12 +180,13 @@ def _build_model(
     from sb3_dtdpg.baselines import algorithm_class, make_env
 
     env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
+    phase_files = {"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}
     if checkpoint is not None:
         pointer, buffer = run_dir / "checkpoint.json", checkpoint["path"] / "replay_buffer.pkl"
         try:
             try:
                 model = algorithm_class(spec.algo).load(
-                    checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose
+                    checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose, **phase_files
                 )
                 if buffer.exists():
                     model.load_replay_buffer(buffer)
@@ -204,7 +205,7 @@ def _build_model(
             env.close()
             raise
         return env, model, int(checkpoint["episodes"])
-    model = build_model(spec, env, verbose=verbose, **({"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}))
+    model = build_model(spec, env, verbose=verbose, **phase_files)
     return env, model, 0
 
 
