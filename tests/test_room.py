@@ -217,3 +217,20 @@ def test_the_tables_gap_is_the_best_planners_distance_from_the_bound_on_the_radi
         assert table.loc[mode.upper(), "mqi_radio_map"] == on_radio_map != table.loc[mode.upper(), "mqi"]
         assert table.loc[mode.upper(), "mqi_gap"] == pytest.approx(table.loc[mode.upper(), "mqi_bound"] - on_radio_map)
         assert table.loc[mode.upper(), "mqi_gap"] >= 0
+
+
+def test_a_room_of_table_one_meets_the_path_bar_with_fading_too(test_missions):
+    # benchmarks/rooms/mall_banner.yaml (docs/SCENARIOS.md): mall with a noise-limited shadow on the shortest paths.
+    from pathlib import Path
+
+    room = str(Path(__file__).resolve().parents[1] / "benchmarks" / "rooms" / "mall_banner.yaml")
+    best, shortest = ReferencePlanner(), ShortestPathPlanner(**PLANNERS[SHORTEST_PATH_PLANNER][1])
+    mqi = {}
+    for channel, mode in (("radio_map", "noma"), ("radio_map", "oma"), ("rayleigh", "noma")):
+        env = gym.make("NomaRadioMap-v0", scenario=room, channel=channel, multiple_access=mode)
+        mqi[channel, mode] = evaluate(best, env, **test_missions).mqi_mean
+        if mode == "noma":
+            mqi[channel, "shortest"] = evaluate(shortest, env, **test_missions).mqi_mean
+    assert mqi["radio_map", "noma"] - mqi["radio_map", "shortest"] >= MIN_PATH_MARGIN
+    assert mqi["radio_map", "noma"] - mqi["radio_map", "oma"] >= MIN_NOMA_MARGIN
+    assert mqi["rayleigh", "noma"] - mqi["rayleigh", "shortest"] >= MIN_PATH_MARGIN
