@@ -67,6 +67,15 @@ def test_a_run_never_deletes_another_runs_tensorboard_logs(tmp_path):
     assert len(_events(shared / SPEC.run_id)) == 1
 
 
+def test_a_run_inside_its_output_folder_never_deletes_the_logs_another_folders_run_put_there(tmp_path):
+    # Run b logs into a's TensorBoard folder (--tb a/tb); a's own run of the same id must not empty it.
+    run_one(SPEC, tmp_path / "b", tensorboard_dir=tmp_path / "a" / "tb")
+    kept = _events(tmp_path / "a" / "tb" / SPEC.run_id)
+    with pytest.raises(RunMismatchError, match=r"holds the logs of run ddpg_noma_s0 in .*b, not of run"):
+        run_one(SPEC, tmp_path / "a")
+    assert len(kept) == 1 and _events(tmp_path / "a" / "tb" / SPEC.run_id) == kept
+
+
 def test_a_fresh_start_keeps_the_logs_of_a_run_whose_id_extends_its_own(tmp_path):
     # e.g. a Table I run ``ddpg_noma_s1_<tag>`` and the tuned ``ddpg_noma_s1_<tag>_tuned`` in one reproduce folder
     longer = dataclasses.replace(SPEC, tag="tuned")

@@ -233,7 +233,8 @@ def tensorboard_claim(tb_dir: Path, out: Path, run_id: str, fresh: bool) -> Iter
     A folder inside the output folder (the default, ``<out>/tb/<run_id>``) is covered by the output folder's
     lock (:func:`output_lock`). One elsewhere gets a lock of its own for the run's duration and a
     :data:`TENSORBOARD_OWNER` file naming the output folder and run id; a folder that holds logs of another
-    output folder's run (or logs of unknown origin) is refused, never emptied.
+    output folder's run (its marker, also inside the output folder) or, elsewhere, logs of unknown origin is
+    refused, never emptied.
 
     :param tb_dir: the run's TensorBoard folder (:func:`tensorboard_folder`)
     :param out: the run's output folder
@@ -253,18 +254,19 @@ def tensorboard_claim(tb_dir: Path, out: Path, run_id: str, fresh: bool) -> Iter
                     f"TensorBoard folder {tb_dir} is in use by another run (lock {lock}); wait for it to end, or "
                     "log to another folder"
                 )
-            marker = tb_dir / TENSORBOARD_OWNER
-            if tb_dir.is_dir() and any(tb_dir.iterdir()):
-                try:
-                    stored = json.loads(marker.read_text())
-                except (OSError, ValueError):
-                    stored = None
-                if stored != owner:
-                    whose = "of unknown origin" if stored is None else f"of run {stored.get('run_id')} in {stored.get('out')}"
-                    raise RunMismatchError(
-                        f"TensorBoard folder {tb_dir} holds the logs {whose}, not of run {run_id} in {out}; log to "
-                        f"another folder (the default is inside the output folder) or delete {tb_dir}"
-                    )
+        marker = tb_dir / TENSORBOARD_OWNER
+        # Inside the output folder only a marker says the logs are another's (a run of another folder logged here).
+        if tb_dir.is_dir() and (marker.exists() or (outside and any(tb_dir.iterdir()))):
+            try:
+                stored = json.loads(marker.read_text())
+            except (OSError, ValueError):
+                stored = None
+            if stored != owner:
+                whose = "of unknown origin" if stored is None else f"of run {stored.get('run_id')} in {stored.get('out')}"
+                raise RunMismatchError(
+                    f"TensorBoard folder {tb_dir} holds the logs {whose}, not of run {run_id} in {out}; log to "
+                    f"another folder (the default is inside the output folder) or delete {tb_dir}"
+                )
         if fresh:
             shutil.rmtree(tb_dir, ignore_errors=True)  # this run's own logs of an interrupted attempt
         if outside:
