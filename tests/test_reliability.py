@@ -314,6 +314,36 @@ def test_train_writes_checkpoints_and_resumes(tmp_path, monkeypatch, capsys, alg
     assert exit_info.value.code == 2 and "spec.episodes: 4 stored, 5 now" in capsys.readouterr().err
 
 
+def test_a_resumed_train_keeps_its_logs_up_to_the_checkpoint_and_shows_each_step_once(tmp_path, monkeypatch):
+    import pandas as pd
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    original = runs.PeriodicCheckpoint._on_rollout_end
+
+    def interrupt_an_episode_after_the_first_checkpoint(self):  # the checkpoint after episode 2, logs to episode 3
+        original(self)
+        if self.counter.n_episodes >= 3:
+            raise KeyboardInterrupt
+
+    argv = [*TRAIN, "--algo", "ddpg", "--episodes", "6", "--out", str(tmp_path), "--no-progress"]
+    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_end", interrupt_an_episode_after_the_first_checkpoint)
+    assert main(argv) == 130
+    checkpoint = json.loads((tmp_path / "runs" / "ddpg_noma_s0" / "checkpoint.json").read_text())
+    tb = tmp_path / "tb" / "ddpg_noma_s0"
+    before = pd.read_csv(tb / "progress.csv")
+    assert list(before["episode/number"]) == [1, 2, 3]  # the interrupted attempt logged past its checkpoint (2)
+    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_end", original)
+    assert main(argv) == 0
+    after = pd.read_csv(tb / "progress.csv")
+    assert list(after["episode/number"]) == [1, 2, 3, 4, 5, 6]  # one row per episode, the third trained again
+    kept = before[before["time/total_timesteps"] <= checkpoint["timesteps"]]
+    assert len(kept) == 2  # the rows up to the checkpoint are kept
+    pd.testing.assert_frame_equal(after[kept.columns][:2], kept, check_dtype=False)
+    board = EventAccumulator(str(tb))  # what TensorBoard shows (it honours the purge; tbparse reads every event)
+    board.Reload()
+    assert [event.step for event in board.Scalars("episode/number")] == [60, 120, 180, 240, 300, 360]
+
+
 # ---------------------------------------------------------------------------------------------- files
 def test_atomic_write_leaves_no_temp_file_when_interrupted(tmp_path):
     target = tmp_path / "model.zip"

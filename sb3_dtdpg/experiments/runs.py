@@ -62,6 +62,7 @@ from sb3_dtdpg.experiments.storage import (
     read_progress,
     result_path,
     run_folder,
+    run_logger,
     save_checkpoint,
     tensorboard_claim,
     tensorboard_folder,
@@ -394,13 +395,10 @@ def _train_and_record(
     verbose: int,
 ) -> dict[str, Any]:
     """The steps of :func:`run_one` once its folders are ready: build, train, save, evaluate, write the result."""
-    from stable_baselines3.common.logger import configure
-
     run_dir = run_folder(out, spec)
     env, model, done_episodes = _build_model(spec, run_dir, checkpoint, identity, verbose)
     start_timesteps = int(model.num_timesteps) if checkpoint is not None else 0  # learn() resets a new model's count
-    # A logger of our own, so that the TensorBoard folder is exactly tb/<run_id> (SB3 would append "_1").
-    model.set_logger(configure(str(tb_dir), ["tensorboard", "csv", *(["stdout"] if verbose else [])]))
+    model.set_logger(run_logger(tb_dir, verbose, start_timesteps if checkpoint is not None else None))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
     counter, callbacks, total_timesteps = _callbacks(spec, out, model, max_steps, done_episodes, identity, checkpoint_every)
     try:

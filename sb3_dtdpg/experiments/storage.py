@@ -3,7 +3,8 @@
 Under an output folder ``<out>``, a run owns ``<out>/runs/<run_id>/``: ``result.json`` (written last,
 atomically: its existence means the run is finished), ``progress.json`` while it trains, ``checkpoint.json`` and
 ``checkpoints/`` when checkpointed, and the saved models; its TensorBoard logs go to ``<out>/tb/<run_id>``
-(:func:`tensorboard_folder`, :func:`tensorboard_claim`). :func:`output_lock` keeps two jobs out of one folder.
+(:func:`tensorboard_folder`, :func:`tensorboard_claim`, :func:`run_logger`). :func:`output_lock` keeps two jobs out
+of one folder.
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+from stable_baselines3.common import logger as sb3_logger
 
 from sb3_dtdpg.common.files import atomic_write, write_json
 from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identity, run_identity
@@ -34,6 +37,7 @@ __all__ = [
     "read_progress",
     "result_path",
     "run_folder",
+    "run_logger",
     "save_checkpoint",
     "tensorboard_claim",
     "tensorboard_folder",
@@ -272,6 +276,67 @@ def tensorboard_claim(tb_dir: Path, out: Path, run_id: str, fresh: bool) -> Iter
         if outside:
             write_json(tb_dir / TENSORBOARD_OWNER, owner)
         yield tb_dir
+
+
+def run_logger(tb_dir: Path, verbose: int = 0, resumed_at: int | None = None) -> Any:
+    """
+    A run's SB3 logger: TensorBoard and ``progress.csv`` in exactly ``tb_dir`` (SB3's own would append ``_1``),
+    and stdout when ``verbose``. A run resumed from its checkpoint at step ``T`` keeps its logs up to ``T`` and
+    drops those after it, which it trains again: the CSV keeps its rows of steps up to ``T`` (was overwritten),
+    and TensorBoard hides the earlier attempt's events of steps after ``T`` (``SummaryWriter``'s ``purge_step``;
+    they were shown twice).
+
+    :param tb_dir: the run's TensorBoard folder
+    :param verbose: also print the logs
+    :param resumed_at: the checkpoint's step count; None: a fresh start
+    :return: the logger
+    """
+    csv_path = tb_dir / "progress.csv"
+    kept = _csv_rows_until(csv_path, resumed_at) if resumed_at is not None else None
+    tb_dir.mkdir(parents=True, exist_ok=True)
+    formats = [sb3_logger.CSVOutputFormat(str(csv_path))]
+    if kept is not None:  # the rows the resumed run keeps, under the header SB3 extends as new keys appear
+        formats[0].keys = kept[0]
+        formats[0].file.writelines([",".join(kept[0]) + "\n", *kept[1]])
+        formats[0].file.flush()
+    formats.append(
+        sb3_logger.TensorBoardOutputFormat(str(tb_dir)) if resumed_at is None else _PurgingTensorBoard(tb_dir, resumed_at + 1)
+    )
+    if verbose:
+        formats.append(sb3_logger.make_output_format("stdout", str(tb_dir)))
+    return sb3_logger.Logger(folder=str(tb_dir), output_formats=formats)
+
+
+class _PurgingTensorBoard(sb3_logger.TensorBoardOutputFormat):
+    """SB3's TensorBoard output whose writer hides the events of steps from ``purge_step`` on in the folder's older
+    event files (``torch.utils.tensorboard.SummaryWriter(purge_step=...)``)."""
+
+    def __init__(self, folder: Path, purge_step: int) -> None:
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.writer = SummaryWriter(log_dir=str(folder), purge_step=purge_step)
+        self._is_closed = False
+
+
+def _csv_rows_until(path: Path, step: int) -> tuple[list[str], list[str]] | None:
+    """:return: the header and the lines of ``progress.csv`` up to the first row logged after ``step`` (None: no file)"""
+    import csv
+
+    try:
+        lines = path.read_text().splitlines(keepends=True)
+    except (OSError, UnicodeDecodeError):
+        return None
+    if not lines:
+        return None
+    header = next(csv.reader(lines[:1]))
+    column = header.index("time/total_timesteps") if "time/total_timesteps" in header else None
+    rows = []
+    for line in lines[1:]:
+        cells = next(csv.reader([line]), [])
+        if column is not None and column < len(cells) and cells[column] and float(cells[column]) > step:
+            break
+        rows.append(line if line.endswith("\n") else line + "\n")
+    return header, rows
 
 
 def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episodes: int) -> Path:
