@@ -308,7 +308,7 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
     from stable_baselines3.common.evaluation import evaluate_policy
 
     from sb3_dtdpg.baselines import make_model, mission_callbacks
-    from sb3_dtdpg.common.files import safe_name
+    from sb3_dtdpg.common.files import atomic_write, safe_name
     from sb3_dtdpg.experiments.runs import EpisodeReturnLogger
 
     model = make_model(
@@ -328,12 +328,23 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
         total = args.episodes * env.spec.max_episode_steps
         callbacks.append(StopTrainingOnMaxEpisodes(args.episodes))
     run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}"
-    model.learn(
-        total_timesteps=total, callback=callbacks, log_interval=1, tb_log_name=run_name, progress_bar=not args.no_progress
-    )
     out = Path(args.out)
+    try:
+        model.learn(
+            total_timesteps=total, callback=callbacks, log_interval=1, tb_log_name=run_name, progress_bar=not args.no_progress
+        )
+    except KeyboardInterrupt:  # as the RL Zoo does: keep the model so far (no checkpoints to resume from here)
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write(out / f"{run_name}_interrupted.zip", model.save)
+        print(
+            f"interrupted after {model.num_timesteps} steps: the model so far is in {out / (run_name + '_interrupted.zip')}; "
+            f"runs on {args.env} are not checkpointed, the same command starts afresh",
+            file=sys.stderr,
+        )
+        env.close()
+        return 130
     out.mkdir(parents=True, exist_ok=True)
-    model.save(out / f"{run_name}.zip")
+    atomic_write(out / f"{run_name}.zip", model.save)
     mean, std = evaluate_policy(model, env, n_eval_episodes=args.eval_episodes, deterministic=True)
     print(
         f"{run_name}: {model.num_timesteps} steps; test ({args.eval_episodes} episodes): reward {mean:.1f} ± {std:.1f}; "

@@ -181,6 +181,22 @@ def test_overrides_reach_the_model(tmp_path, capsys):
     assert model.policy.actor.mu[0].out_features == 8
 
 
+def test_an_interrupted_train_on_another_env_keeps_its_model_and_says_it_starts_afresh(tmp_path, monkeypatch, capsys):
+    from stable_baselines3 import DDPG
+
+    def interrupted(self, *args, **kwargs):
+        self.num_timesteps = 70
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(DDPG, "learn", interrupted)
+    args = ["train", "--algo", "ddpg", "--env", "Pendulum-v1", "--timesteps", "3000", "--no-progress"]
+    assert main([*args, "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]) == 130
+    message = capsys.readouterr().err
+    assert "interrupted after 70 steps: the model so far is in" in message and "starts afresh" in message
+    assert "resume" not in message  # there is nothing to resume from (was: "run the same command again to resume")
+    assert DDPG.load(tmp_path / "ddpg_Pendulum-v1_s0_interrupted.zip").num_timesteps == 70
+
+
 def test_the_option_choices_are_the_libraries(monkeypatch):
     from noma_radiomap.registration import OBSERVATIONS
     from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID, HYPERPARAMS
