@@ -51,6 +51,7 @@ __all__ = [
     "default_observation_of",
     "hyperparameter",
     "is_mission_env",
+    "load_model",
     "make_env",
     "make_model",
     "mission_callbacks",
@@ -85,6 +86,24 @@ def algorithm_class(algo: str) -> type[BaseAlgorithm]:
     :return: the SB3 class of the algorithm (to ``load`` a saved model)
     """
     return _CLASSES[_check_algo(algo)]
+
+
+def load_model(algo: str, path: Any, **kwargs: Any) -> BaseAlgorithm:
+    """
+    SB3's ``load`` of a saved model of ``algo``, without the warning SB3 2.9 gives on reloading its own n-step
+    models ("`n_steps=3` is ignored because a custom `replay_buffer_class` ... was passed": the saved buffer
+    settings are restored all the same).
+
+    :param algo: one of :data:`ALGORITHMS`
+    :param path: the zip
+    :param kwargs: ``load``'s keyword arguments (``env``, ``device``, ``custom_objects``, settings)
+    :return: the model
+    """
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
+        return algorithm_class(algo).load(path, **kwargs)
 
 
 def check_hyperparams(algo: str, hyperparams: str) -> None:

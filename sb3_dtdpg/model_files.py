@@ -113,13 +113,13 @@ class SavedModel:
 
     def load(self, env: Any) -> Any:
         """:return: the model, loaded onto ``env`` after checking the env's settings against the recorded ones"""
-        from sb3_dtdpg.baselines import algorithm_class
+        from sb3_dtdpg.baselines import load_model
 
         check_settings(self.settings, env, f"the model {self.path}")
         # verbose 0: a model saved with verbose=1 (the RL Zoo's) would print SB3's env-wrapping notice on load
         custom_objects = {"verbose": 0, **self.custom_objects}
         try:
-            return algorithm_class(self.algo).load(self.path, env=env, device="cpu", custom_objects=custom_objects)
+            return load_model(self.algo, self.path, env=env, device="cpu", custom_objects=custom_objects)
         except ValueError as error:
             if self.settings or "spaces do not match" not in str(error):
                 raise

@@ -575,3 +575,18 @@ def test_a_paper_task_model_is_tested_on_its_room(tmp_path, scenario):
         read_saved_model(tmp_path / "model.zip").load(test_env).env_settings["scenario_digest"]
         == settings_of(env)["scenario_digest"]
     )
+
+
+def test_a_saved_n_step_ddpg_loads_without_sb3s_spurious_buffer_warning(tmp_path):
+    # SB3 2.9 warns that n_steps is ignored when reloading its own n-step DDPG, then restores the buffer all the same.
+    import warnings
+
+    from sb3_dtdpg.baselines import load_model
+
+    DDPG("MlpPolicy", small_env(), n_steps=3, learning_starts=10).save(tmp_path / "model.zip")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model = load_model("ddpg", tmp_path / "model.zip", env=small_env())
+    assert (type(model.replay_buffer).__name__, model.replay_buffer.n_steps) == ("NStepReplayBuffer", 3)
+    with pytest.warns(UserWarning, match="is ignored because a custom"):  # what the wrapper keeps from users
+        DDPG.load(tmp_path / "model.zip", env=small_env())

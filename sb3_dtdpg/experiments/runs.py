@@ -178,7 +178,7 @@ def _build_model(
     """
     from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 
-    from sb3_dtdpg.baselines import algorithm_class, make_env
+    from sb3_dtdpg.baselines import load_model, make_env
 
     env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
     phase_files = {"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}
@@ -186,8 +186,8 @@ def _build_model(
         pointer, buffer = run_dir / "checkpoint.json", checkpoint["path"] / "replay_buffer.pkl"
         try:
             try:
-                model = algorithm_class(spec.algo).load(
-                    checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose, **phase_files
+                model = load_model(
+                    spec.algo, checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose, **phase_files
                 )
                 if buffer.exists():
                     model.load_replay_buffer(buffer)
@@ -277,7 +277,7 @@ def _evaluations(
     spec: RunSpec, model: Any, run_dir: Path, trained_on: list[str], final_reward_phase: str, n_trajectories: int
 ) -> dict[str, Any]:
     """:return: the evaluation records of the trained model and, for DT-DPG, of its network before the transfer"""
-    from sb3_dtdpg.baselines import algorithm_class, make_env
+    from sb3_dtdpg.baselines import load_model, make_env
     from sb3_dtdpg.evaluation import evaluate
 
     def _evaluate(policy: Any, reward_phase: str) -> Any:
@@ -296,7 +296,7 @@ def _evaluations(
     before = sorted(run_dir.glob("phase_*_destination.zip"))
     if before and spec.eval_before_transfer:
         load_env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
-        phase_1 = algorithm_class(spec.algo).load(before[0], env=load_env, device="cpu")
+        phase_1 = load_model(spec.algo, before[0], env=load_env, device="cpu")
         phase_1_reward = trained_on[0]
         records["before_transfer"] = _evaluation_record(_evaluate(phase_1, phase_1_reward), n_trajectories, phase_1_reward)
         load_env.close()
