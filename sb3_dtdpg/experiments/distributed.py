@@ -3,9 +3,9 @@
 Every run (algorithm x mode x seed x experiment) is independent. A worker on any machine builds the same run
 list, joins one Optuna study on a shared storage (JournalFile on a shared disk, or PostgreSQL, as for the zoo's
 hyperparameter search in docs/ZOO.md) whose ``GridSampler`` hands each run to one worker, and runs it into a
-shared output folder (``<out>/runs/<run_id>/result.json``, written last). Finished runs are skipped, so a
-restarted worker resumes. ``sb3-dtdpg reproduce --report-only --out <out>`` (or ``compare`` again) then draws
-the tables from the gathered results.
+shared output folder (``<out>/runs/<run_id>/result.json``, written last). A run's lock in the folder keeps a
+second worker out of a run in training; a run without a result (interrupted, or its worker died) is taken again.
+``sb3-dtdpg reproduce --report-only --out <out>`` (or ``compare`` again) then draws the tables from the results.
 
 Usage, on every machine (the options and defaults of ``sb3-dtdpg reproduce`` / ``compare``, so that the same
 options on the CLI later find the same runs)::
@@ -15,11 +15,13 @@ options on the CLI later find the same runs)::
 """
 
 import argparse
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from sb3_dtdpg.experiments.runs import RunSpec, get_budget, load_result, run_one
+from sb3_dtdpg.experiments.runs import OutputBusyError, RunSpec, get_budget, load_result, result_path, run_one
+from sb3_dtdpg.experiments.storage import FOLDER_LOCK, hold_lock  # the OS locks of output_lock, held apart here
 
 
 def study_specs(
@@ -71,6 +73,17 @@ def study_specs(
     raise ValueError(f"job must be 'reproduce' or 'compare', got {job!r}")
 
 
+def _run_lock(out: Path, spec: RunSpec) -> Path:
+    """:return: a run's lock file, the one ``sb3-dtdpg train`` holds (``output_lock(out, f".{run_id}.lock")``)"""
+    return out / f".{spec.run_id}.lock"
+
+
+def _lock_is_free(path: Path) -> bool:
+    """:return: whether no process holds the lock ``path`` (a file left by a killed holder is free)"""
+    with hold_lock(path, shared=False) as free:
+        return free
+
+
 def run_study_worker(
     specs: list[RunSpec],
     out: str | Path,
@@ -80,15 +93,24 @@ def run_study_worker(
     run: Callable[[RunSpec, str | Path], Any] = run_one,
 ) -> list[str]:
     """
-    Take runs from a shared Optuna study (a ``GridSampler`` over the run indices) until none is left.
+    Take runs from a shared Optuna study until every run is finished, trained by another worker, or failed.
+
+    A run is finished when its result file exists. The worker holds a shared hold of the folder's lock while it
+    lives (a ``compare`` / ``reproduce`` job on the folder is refused, and refuses it), and a run's lock
+    (``<out>/.<run_id>.lock``, that of ``sb3-dtdpg train``) while it trains the run: OS locks, released when
+    the process ends, even when killed. While some run has no trial yet, the ``GridSampler`` hands one out; then
+    the worker enqueues a trial for the first unfinished run whose lock is free (one that a worker was interrupted
+    on, or whose worker died), and ends when none is left. A run whose attempt failed with an error (user
+    attribute ``error`` of its failed trial) is not taken again: it would fail again.
 
     :param specs: the runs (:func:`study_specs`; the same list on every worker)
     :param out: the shared output folder
     :param storage: an Optuna storage or its URL (a ``.log`` path: a ``JournalFileStorage``)
     :param study_name: the study shared by the workers of one job
-    :param n_runs: stop after this many runs (None: until the grid is exhausted)
+    :param n_runs: stop after training this many runs (None: until no run is left to take)
     :param run: the function that runs one spec (tests pass a cheap one)
-    :return: the run ids this worker ran (a run found finished is not run again)
+    :return: the run ids this worker trained
+    :raises OutputBusyError: a ``compare`` / ``reproduce`` job holds the folder
     """
     import optuna
 
@@ -97,24 +119,47 @@ def run_study_worker(
         from optuna.storages.journal import JournalFileBackend
 
         storage = JournalStorage(JournalFileBackend(storage))
-    indices = list(range(len(specs)))
-    sampler = optuna.samplers.GridSampler({"run": indices}, seed=0)
-    study = optuna.create_study(storage=storage, study_name=study_name, sampler=sampler, load_if_exists=True)
+    out, indices = Path(out), list(range(len(specs)))
     done: list[str] = []
-    taken = {trial.params.get("run") for trial in study.get_trials(deepcopy=False) if trial.state.is_finished()}
-    if taken >= set(indices):
-        return done  # every run was handed out (GridSampler would re-run one)
+    state: dict[str, Any] = {"failed": set(), "picked": None}
 
     def objective(trial: optuna.Trial) -> float:
-        spec = specs[trial.suggest_categorical("run", indices)]
+        index = state["picked"] = trial.suggest_categorical("run", indices)
+        spec = specs[index]
         trial.set_user_attr("run_id", spec.run_id)
-        if load_result(out, spec) is None:
-            run(spec, out)
-            done.append(spec.run_id)
+        with hold_lock(_run_lock(out, spec), shared=False) as free:
+            if not free or index in state["failed"] or load_result(out, spec) is not None:
+                why = "another worker trains it" if not free else "failed before" if index in state["failed"] else "done"
+                raise optuna.TrialPruned(f"{spec.run_id}: {why}")
+            try:
+                run(spec, out)
+            except Exception as error:  # not a KeyboardInterrupt: an interrupted run is taken again
+                trial.set_user_attr("error", f"{type(error).__name__}: {error}"[:500])
+                raise
+        done.append(spec.run_id)
         return 0.0
 
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    study.optimize(objective, n_trials=n_runs)
+    handing_out = True  # the GridSampler still has runs that no trial took
+    with hold_lock(out / FOLDER_LOCK, shared=True) as free:
+        if not free:
+            raise OutputBusyError(f"{out} is in use by another job (lock {out / FOLDER_LOCK}); wait for it to end")
+        sampler = optuna.samplers.GridSampler({"run": indices}, seed=0)
+        study = optuna.create_study(storage=storage, study_name=study_name, sampler=sampler, load_if_exists=True)
+        optuna.logging.set_verbosity(optuna.logging.WARNING)
+        while n_runs is None or len(done) < n_runs:
+            trials = study.get_trials(deepcopy=False)
+            state["failed"] = {trial.params.get("run") for trial in trials if "error" in trial.user_attrs}
+            left = [i for i in indices if i not in state["failed"] and not result_path(out, specs[i]).exists()]
+            taken = {trial.params["run"] for trial in trials if "run" in trial.params}
+            handing_out = handing_out and any(index not in taken for index in left)
+            if not handing_out:  # every run left was handed out: take one that no live worker trains
+                free_run = next((i for i in left if _lock_is_free(_run_lock(out, specs[i]))), None)
+                if free_run is None:
+                    break  # every run is finished, failed, or trained by another worker
+                study.enqueue_trial({"run": free_run})
+            state["picked"] = None
+            study.optimize(objective, n_trials=1)
+            handing_out = handing_out and state["picked"] not in taken  # a grid point handed out again: exhausted
     return done
 
 
@@ -210,9 +255,16 @@ def main(argv: list[str] | None = None) -> None:
         args.error(str(error))
     try:
         done = run_study_worker(specs, args.out, args.storage, args.study_name)
-    except (RunMismatchError, RunDivergedError, DamagedRecordError) as error:  # what the CLI reports as one line
+    except (RunMismatchError, RunDivergedError, DamagedRecordError, OutputBusyError) as error:  # one line, as the CLI
         args.error(str(error))
-    print(f"{len(done)} runs of {len(specs)} done by this worker")
+    except KeyboardInterrupt:
+        print("interrupted: the run in training starts afresh when a worker takes it again", file=sys.stderr)
+        raise SystemExit(130) from None
+    left = sum(not result_path(args.out, spec).exists() for spec in specs)
+    print(
+        f"{len(done)} runs of {len(specs)} done by this worker"
+        + (f"; {left} not finished (training in other workers, or failed: the study's trials say which)" if left else "")
+    )
 
 
 if __name__ == "__main__":

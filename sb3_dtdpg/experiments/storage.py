@@ -30,6 +30,7 @@ __all__ = [
     "OutputBusyError",
     "clear_checkpoints",
     "failure_path",
+    "hold_lock",
     "load_result",
     "output_lock",
     "progress_path",
@@ -132,7 +133,7 @@ FOLDER_LOCK = ".lock"
 
 
 @contextlib.contextmanager
-def _hold(path: Path, shared: bool) -> Iterator[bool]:
+def hold_lock(path: Path, shared: bool) -> Iterator[bool]:
     """Hold an OS lock on ``path`` (released when the process ends, even when killed); yield whether it was free."""
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
@@ -213,7 +214,7 @@ def output_lock(out: str | Path, name: str = FOLDER_LOCK) -> Iterator[Path]:
         if name != FOLDER_LOCK:
             holds.append((out / name, False))
         for path, shared in holds:
-            if not stack.enter_context(_hold(path, shared)):
+            if not stack.enter_context(hold_lock(path, shared)):
                 raise OutputBusyError(
                     f"{out} is in use by another job (lock {path}); wait for it to end, or use another output folder"
                 )
@@ -253,7 +254,7 @@ def tensorboard_claim(tb_dir: Path, out: Path, run_id: str, fresh: bool) -> Iter
         outside = not tb_dir.resolve().is_relative_to(out)
         if outside:
             lock = tb_dir.parent / f".{tb_dir.name}.lock"
-            if not stack.enter_context(_hold(lock, shared=False)):
+            if not stack.enter_context(hold_lock(lock, shared=False)):
                 raise OutputBusyError(
                     f"TensorBoard folder {tb_dir} is in use by another run (lock {lock}); wait for it to end, or "
                     "log to another folder"
