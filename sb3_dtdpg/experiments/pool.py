@@ -1,7 +1,8 @@
 """The worker processes of :func:`sb3_dtdpg.experiments.runs.run_many` and its progress display.
 
 Workers are spawned processes (no state inherited from the parent) that end when their parent process ends,
-however it ends, so that killing a job never leaves workers running its queued runs.
+however it ends, so that killing a job never leaves workers running its queued runs. On Ctrl-C or SIGTERM the
+parent stops its workers and waits until they are gone before it goes on (and its job releases its folder lock).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -32,7 +33,11 @@ def _die_with_parent(parent_pid: int) -> None:
     """
     Worker initialiser: end this process when its parent ends, however it ends (SIGTERM, SIGKILL, a crash).
     On Linux the kernel sends SIGKILL (``PR_SET_PDEATHSIG``); elsewhere a thread polls the parent's pid.
+
+    The worker ignores SIGINT: a terminal's Ctrl-C reaches the whole process group, and a worker interrupted in a
+    task would go on with the next queued one; the parent stops its workers instead (:func:`run_in_pool`).
     """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
@@ -153,6 +158,11 @@ def run_in_pool(
     Run ``work(*job)`` for every job in a :func:`worker_pool`, recording each run in ``report`` as it ends; a
     failed run does not take the others down.
 
+    When the call ends early (Ctrl-C, SIGTERM, an error), the workers are killed and gone before it returns: the
+    runs in progress are abandoned (they start afresh next time) and no queued run starts, so that the caller
+    releases its folder lock only when nothing writes to the folder any more. Ctrl-C raises ``KeyboardInterrupt``;
+    SIGTERM (when it has its default action) then ends the process as it would have.
+
     :param work: a module-level function (it is sent to spawned processes) returning the run id and its seconds
     :param jobs: the arguments of each call, the run's spec first
     :param out: output folder (where the running runs' progress is read)
@@ -161,30 +171,82 @@ def run_in_pool(
     :param progress: show a progress bar
     :param on_finish: called with each run id as it finishes
     """
-    with RunBars(out, len(jobs), enabled=progress) as bars:
-        if not jobs:
-            return
-        executor = worker_pool(n_workers)
-        try:
-            pending = {executor.submit(work, *job): job[0] for job in jobs}
-            while pending:
-                done, _ = wait(pending, timeout=2.0 if progress else None, return_when=FIRST_COMPLETED)
-                bars.show_running(pending.values())
-                for future in done:
-                    spec = pending.pop(future)
-                    try:
-                        _, seconds = future.result()
-                        report.finished.append(spec.run_id)
-                        bars.finished(spec.run_id, f"{spec.run_id} done in {seconds:.0f} s")
-                        if on_finish is not None:
-                            on_finish(spec.run_id)
-                    except Exception as error:  # a failed run must not take the others down
-                        report.failed[spec.run_id] = failure_message(error)
-                        bars.finished(spec.run_id, f"{spec.run_id} FAILED")
-        except KeyboardInterrupt:
-            executor.shutdown(wait=False, cancel_futures=True)
-            raise
-        executor.shutdown()
+    try:
+        with _sigterm_raises(), RunBars(out, len(jobs), enabled=progress) as bars:
+            if not jobs:
+                return
+            executor = worker_pool(n_workers)
+            try:
+                pending = {executor.submit(work, *job): job[0] for job in jobs}
+                while pending:
+                    done, _ = wait(pending, timeout=2.0 if progress else None, return_when=FIRST_COMPLETED)
+                    bars.show_running(pending.values())
+                    for future in done:
+                        spec = pending.pop(future)
+                        try:
+                            _, seconds = future.result()
+                            report.finished.append(spec.run_id)
+                            bars.finished(spec.run_id, f"{spec.run_id} done in {seconds:.0f} s")
+                            if on_finish is not None:
+                                on_finish(spec.run_id)
+                        except Exception as error:  # a failed run must not take the others down
+                            report.failed[spec.run_id] = failure_message(error)
+                            bars.finished(spec.run_id, f"{spec.run_id} FAILED")
+            except BaseException:
+                _stop_workers(executor)
+                raise
+            executor.shutdown()
+    except _Terminated:
+        # The workers are gone and the bars closed: now SIGTERM's default action (the handler is restored).
+        signal.raise_signal(signal.SIGTERM)
+        raise
+
+
+def _stop_workers(executor: ProcessPoolExecutor) -> None:
+    """
+    Kill the worker processes of ``executor`` and wait until they are gone. ``shutdown(cancel_futures=True)``
+    alone would not stop them: a worker finishes its task and takes the queued ones already sent to it, and the
+    interpreter's exit waits for them.
+    """
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None  # a second Ctrl-C must not cut it short
+    try:
+        # ProcessPoolExecutor has no public way to stop its workers before Python 3.14 (kill_workers, which does
+        # not wait for them); its pid -> Process map is the same from Python 3.9 to 3.14.
+        processes = list((executor._processes or {}).values())
+        for process in processes:
+            process.kill()
+        for process in processes:
+            process.join()
+        executor.shutdown(wait=True, cancel_futures=True)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+class _Terminated(BaseException):
+    """SIGTERM reached the process while :func:`run_in_pool` ran (see :func:`_sigterm_raises`)."""
+
+
+@contextlib.contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """
+    Within the block, SIGTERM raises :class:`_Terminated` in the main thread instead of ending the process at
+    once, so that :func:`run_in_pool` stops its workers before the process ends and its folder lock is released.
+    Only where SIGTERM has its default action and in the main thread (a program's own handler is left alone).
+    """
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        yield
+        return
+
+    def terminated(signum: int, frame: object) -> None:
+        raise _Terminated
+
+    signal.signal(signal.SIGTERM, terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def failure_message(error: BaseException) -> str:
