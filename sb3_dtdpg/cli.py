@@ -243,6 +243,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
     """``train`` on a NomaRadioMap env: a run of :func:`sb3_dtdpg.experiments.runs.run_one`, checkpointed."""
     from sb3_dtdpg.evaluation import format_ci
     from sb3_dtdpg.experiments.runs import DamagedRecordError, RunSpec, output_lock, read_checkpoint, run_one
+    from sb3_dtdpg.experiments.storage import run_lock_name
 
     spec = RunSpec(
         args.algo,
@@ -264,7 +265,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
     out = Path(args.out)
     run_dir = out / "runs" / spec.run_id
     try:
-        with _busy_folder_errors(args), output_lock(out, f".{spec.run_id}.lock"):
+        with _busy_folder_errors(args), output_lock(out, run_lock_name(spec.run_id)):
             result = run_one(
                 spec,
                 out,

@@ -184,6 +184,8 @@ def test_overrides_reach_the_model(tmp_path, capsys):
 def test_an_interrupted_train_on_another_env_keeps_its_model_and_says_it_starts_afresh(tmp_path, monkeypatch, capsys):
     from stable_baselines3 import DDPG
 
+    from sb3_dtdpg.baselines import load_model
+
     def interrupted(self, *args, **kwargs):
         self.num_timesteps = 70
         raise KeyboardInterrupt
@@ -194,7 +196,7 @@ def test_an_interrupted_train_on_another_env_keeps_its_model_and_says_it_starts_
     message = capsys.readouterr().err
     assert "interrupted after 70 steps: the model so far is in" in message and "starts afresh" in message
     assert "resume" not in message  # there is nothing to resume from (was: "run the same command again to resume")
-    assert DDPG.load(tmp_path / "ddpg_Pendulum-v1_s0_interrupted.zip").num_timesteps == 70
+    assert load_model("ddpg", tmp_path / "ddpg_Pendulum-v1_s0_interrupted.zip").num_timesteps == 70
 
 
 def test_the_option_choices_are_the_libraries(monkeypatch):

@@ -282,6 +282,11 @@ def test_the_phase_folder_is_not_saved_with_the_model(tmp_path):
     again = DTDPG.load(tmp_path / "copy.zip", env=_phased(), curriculum_save_path=str(tmp_path / "phases"))
     again.learn(30)
     assert os.path.isfile(tmp_path / "phases" / "phase_0_destination.zip")
+    # A zip saved before the folder was left out of saving still carries it: loading drops it all the same.
+    older = DTDPG("MlpPolicy", _phased(), phases=phases, curriculum_save_path=str(tmp_path / "original"), **TINY)
+    older._excluded_save_params = lambda: [n for n in DTDPG._excluded_save_params(older) if n != "curriculum_save_path"]
+    older.save(tmp_path / "older.zip")
+    assert DTDPG.load(tmp_path / "older.zip", env=_phased()).curriculum_save_path is None
 
 
 class _ModeRecorder(BaseCallback):

@@ -86,3 +86,16 @@ def test_an_interrupted_job_stops_its_workers_before_it_releases_its_lock(tmp_pa
         with contextlib.suppress(ProcessLookupError):
             os.killpg(job.pid, signal.SIGKILL)
         job.wait()
+
+
+def test_a_worker_pool_left_by_an_exception_kills_its_workers_instead_of_finishing_the_queue():
+    # The benchmarks' `with worker_pool(n) as pool:` (no run_in_pool around it): Ctrl-C in the block ends it at once.
+    from sb3_dtdpg.experiments.pool import worker_pool
+
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt), worker_pool(1) as pool:
+        for _ in range(3):
+            pool.submit(time.sleep, 60)
+        workers = list(pool._processes.values())
+        raise KeyboardInterrupt
+    assert time.monotonic() - start < 30 and workers and not any(worker.is_alive() for worker in workers)

@@ -344,6 +344,24 @@ def test_a_resumed_train_keeps_its_logs_up_to_the_checkpoint_and_shows_each_step
     assert [event.step for event in board.Scalars("episode/number")] == [60, 120, 180, 240, 300, 360]
 
 
+@pytest.mark.parametrize(
+    ("written", "kept"),
+    [
+        ("a,time/total_timesteps\n1,60\n2,120\n3,180\n", "1,60\n2,120\n"),  # the rows after the checkpoint go
+        ("a,time/total_timesteps\n1,60\n2,1", "1,60\n"),  # a row cut by a kill is no row
+        ('a,time/total_timesteps\n1,60\n2,"x"\n3,90\n', "1,60\n"),  # nor one that is not a step count
+        ("", ""),
+    ],
+)
+def test_a_resumed_runs_csv_keeps_its_whole_rows_up_to_the_checkpoint(tmp_path, written, kept):
+    from sb3_dtdpg.experiments.storage import run_logger
+
+    (tmp_path / "progress.csv").write_text(written)
+    run_logger(tmp_path, resumed_at=120).close()
+    text = (tmp_path / "progress.csv").read_text()
+    assert text == ("a,time/total_timesteps\n" + kept if written else "")
+
+
 # ---------------------------------------------------------------------------------------------- files
 def test_atomic_write_leaves_no_temp_file_when_interrupted(tmp_path):
     target = tmp_path / "model.zip"

@@ -588,5 +588,6 @@ def test_a_saved_n_step_ddpg_loads_without_sb3s_spurious_buffer_warning(tmp_path
         warnings.simplefilter("error")
         model = load_model("ddpg", tmp_path / "model.zip", env=small_env())
     assert (type(model.replay_buffer).__name__, model.replay_buffer.n_steps) == ("NStepReplayBuffer", 3)
-    with pytest.warns(UserWarning, match="is ignored because a custom"):  # what the wrapper keeps from users
+    # A canary: once SB3 stops warning, this fails and load_model's filter can go.
+    with pytest.warns(UserWarning, match="is ignored because a custom"):
         DDPG.load(tmp_path / "model.zip", env=small_env())

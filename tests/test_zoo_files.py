@@ -62,7 +62,7 @@ def test_every_budget_is_the_papers_500_episodes_of_its_env(name):
 def test_the_paper_files_are_keyed_by_the_paper_task_ids(name):
     entries = _load(name)
     assert set(entries) == set(PAPER_IDS) == {"NomaRadioMapPaper-v0", "NomaRadioMapPaperOMA-v0"}
-    assert not set(entries) & set(MISSION_IDS), "a paper-task run is logged under an id of the paper's task"
+    assert not set(entries) & set(MISSION_IDS), "a paper-task run would be logged under a mission id"
     for env_id in PAPER_IDS:
         assert "task" not in entries[env_id]["env_kwargs"], "the env id sets it"
         env = gym.make(env_id, **entries[env_id]["env_kwargs"])

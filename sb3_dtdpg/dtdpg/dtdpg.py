@@ -390,6 +390,7 @@ class DTDPG(LeanStep, DDPG):
             check_folder("DTDPG.load", folder, kwargs.get(folder))
         if kwargs.get("phases") is not None:
             kwargs["phases"] = parse_phases(kwargs["phases"])
+        kwargs.setdefault("curriculum_save_path", None)  # zips saved before it was excluded from saving carry one
         data = load_from_zip_file(path, device="cpu", custom_objects=custom_objects, load_data=True)[0] or {}
         if env is not None:
             env_settings.check_settings(data.get("env_settings"), env, f"the model {path}")

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.experiments.runs import OutputBusyError, RunSpec, get_budget, load_result, result_path, run_one
-from sb3_dtdpg.experiments.storage import FOLDER_LOCK, hold_lock  # the OS locks of output_lock, held apart here
+from sb3_dtdpg.experiments.storage import FOLDER_LOCK, hold_lock, run_lock_name  # output_lock's OS locks, held apart
 
 
 def study_specs(
@@ -74,8 +74,8 @@ def study_specs(
 
 
 def _run_lock(out: Path, spec: RunSpec) -> Path:
-    """:return: a run's lock file, the one ``sb3-dtdpg train`` holds (``output_lock(out, f".{run_id}.lock")``)"""
-    return out / f".{spec.run_id}.lock"
+    """:return: a run's lock file, the one ``sb3-dtdpg train`` holds"""
+    return out / run_lock_name(spec.run_id)
 
 
 def _lock_is_free(path: Path) -> bool:

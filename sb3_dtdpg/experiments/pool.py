@@ -58,12 +58,21 @@ def worker_pool(n_workers: int) -> ProcessPoolExecutor:
     the parent process ends, so that killing a job never leaves workers running its queued runs.
 
     :param n_workers: number of processes
-    :return: the executor
+    :return: the executor (in a ``with`` block left by an exception, its workers are killed and waited for)
     """
     context = multiprocessing.get_context("spawn")
-    return ProcessPoolExecutor(
-        max_workers=n_workers, mp_context=context, initializer=_die_with_parent, initargs=(os.getpid(),)
-    )
+    return _WorkerPool(max_workers=n_workers, mp_context=context, initializer=_die_with_parent, initargs=(os.getpid(),))
+
+
+class _WorkerPool(ProcessPoolExecutor):
+    """A process pool whose ``with`` block, left by an exception (Ctrl-C, SIGTERM), kills its workers and waits for
+    them (:func:`_stop_workers`) instead of letting them finish the tasks already queued."""
+
+    def __exit__(self, exc_type: Any, exc_value: Any, traceback: Any) -> bool | None:
+        if exc_type is not None:
+            _stop_workers(self)
+            return False
+        return super().__exit__(exc_type, exc_value, traceback)
 
 
 @dataclass

@@ -38,6 +38,7 @@ __all__ = [
     "read_progress",
     "result_path",
     "run_folder",
+    "run_lock_name",
     "run_logger",
     "save_checkpoint",
     "tensorboard_claim",
@@ -132,9 +133,21 @@ def read_progress(out: str | Path, spec: RunSpec) -> dict[str, Any] | None:
 FOLDER_LOCK = ".lock"
 
 
+def run_lock_name(run_id: str) -> str:
+    """:return: the name of a run's lock file in its output folder (held by ``sb3-dtdpg train`` and the distributed workers)"""
+    return f".{run_id}.lock"
+
+
 @contextlib.contextmanager
 def hold_lock(path: Path, shared: bool) -> Iterator[bool]:
-    """Hold an OS lock on ``path`` (released when the process ends, even when killed); yield whether it was free."""
+    """
+    Hold an OS lock on ``path``, released when the block ends or the process ends (even when killed).
+
+    :param path: the lock file (created with its folder)
+    :param shared: a shared hold (several holders at once) rather than an exclusive one; without ``fcntl``
+        (Windows) every hold is exclusive
+    :return: (yields) whether the lock was free; a lock that was not is not held
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         import fcntl
@@ -279,7 +292,7 @@ def tensorboard_claim(tb_dir: Path, out: Path, run_id: str, fresh: bool) -> Iter
         yield tb_dir
 
 
-def run_logger(tb_dir: Path, verbose: int = 0, resumed_at: int | None = None) -> Any:
+def run_logger(tb_dir: Path, verbose: int = 0, resumed_at: int | None = None) -> sb3_logger.Logger:
     """
     A run's SB3 logger: TensorBoard and ``progress.csv`` in exactly ``tb_dir`` (SB3's own would append ``_1``),
     and stdout when ``verbose``. A run resumed from its checkpoint at step ``T`` keeps its logs up to ``T`` and
@@ -327,6 +340,8 @@ def _csv_rows_until(path: Path, step: int) -> tuple[list[str], list[str]] | None
         lines = path.read_text().splitlines(keepends=True)
     except (OSError, UnicodeDecodeError):
         return None
+    if lines and not lines[-1].endswith("\n"):  # a row cut by a kill (SB3 ends each row before it flushes)
+        lines.pop()
     if not lines:
         return None
     header = next(csv.reader(lines[:1]))
@@ -334,9 +349,13 @@ def _csv_rows_until(path: Path, step: int) -> tuple[list[str], list[str]] | None
     rows = []
     for line in lines[1:]:
         cells = next(csv.reader([line]), [])
-        if column is not None and column < len(cells) and cells[column] and float(cells[column]) > step:
-            break
-        rows.append(line if line.endswith("\n") else line + "\n")
+        if column is not None and column < len(cells) and cells[column]:
+            try:
+                if float(cells[column]) > step:
+                    break
+            except ValueError:  # not a step count: a damaged row, and what follows it is not kept either
+                break
+        rows.append(line)
     return header, rows
 
 
