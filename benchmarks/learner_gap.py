@@ -137,10 +137,12 @@ def mission_splits(policy: Any, env: gym.Env, episodes: int, seed: int) -> list[
     return splits
 
 
-def _model_env(path: Path) -> tuple[Any, gym.Env, dict[str, Any]]:
+def _model_env(path: Path) -> tuple[Any, gym.Env, dict[str, Any], dict[str, Any]]:
+    """:return: the model, its radio-map test env, its settings (with ``algo``) and that env's make arguments"""
     saved = read_saved_model(path, None)
-    env = gym.make(saved.env_id or "NomaRadioMap-v0", **saved.env_kwargs("radio_map"))
-    return saved.load(env), env, {**(saved.settings or {}), "algo": saved.algo}
+    kwargs = saved.env_kwargs("radio_map")  # a scenario file's path where it was trained on one
+    env = gym.make(saved.env_id or "NomaRadioMap-v0", **kwargs)
+    return saved.load(env), env, {**(saved.settings or {}), "algo": saved.algo}, kwargs
 
 
 def measure(out: Path, episodes: int, seed: int) -> pd.DataFrame:
@@ -153,9 +155,9 @@ def measure(out: Path, episodes: int, seed: int) -> pd.DataFrame:
         raise SystemExit(f"no models in {out}/runs/*/model.zip: give the output folder of compare or reproduce")
     envs: dict[str, dict[str, Any]] = {}
     for path in models:
-        model, env, settings = _model_env(path)
+        model, env, settings, kwargs = _model_env(path)
         mode = str(settings.get("multiple_access", "noma"))
-        envs.setdefault(mode, {k: settings[k] for k in ("scenario", "observation", "task") if settings.get(k) is not None})
+        envs.setdefault(mode, {k: kwargs[k] for k in ("scenario", "observation", "task") if kwargs.get(k) is not None})
         label = ALGO_LABELS.get(settings["algo"], settings["algo"])
         if settings.get("power_mapping", "paper") != "paper":  # benchmarks/power_shares.py's other arm
             label += f" ({settings['power_mapping']})"
