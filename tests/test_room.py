@@ -222,6 +222,7 @@ def test_the_tables_gap_is_the_best_planners_distance_from_the_bound_on_the_radi
         assert table.loc[mode.upper(), "mqi_gap"] >= 0
 
 
+@pytest.mark.slow  # ~12 s: five planner evaluations on a room of its own (benchmarks/room_calibration.py measures it too)
 def test_a_room_of_table_one_meets_the_path_bar_with_fading_too(test_missions):
     # benchmarks/rooms/mall_banner.yaml (docs/SCENARIOS.md): mall with a noise-limited shadow on the shortest paths.
     from pathlib import Path
