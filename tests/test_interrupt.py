@@ -99,3 +99,25 @@ def test_a_worker_pool_left_by_an_exception_kills_its_workers_instead_of_finishi
         workers = list(pool._processes.values())
         raise KeyboardInterrupt
     assert time.monotonic() - start < 30 and workers and not any(worker.is_alive() for worker in workers)
+
+
+def test_a_worker_that_does_not_die_is_left_behind_with_a_message(monkeypatch, capsys):
+    # A process in uninterruptible I/O outlives SIGKILL: the stop must not wait for it forever.
+    import multiprocessing.process
+
+    from sb3_dtdpg.experiments import pool as pool_module
+
+    monkeypatch.setattr(pool_module, "STOP_TIMEOUT_S", 0.5)
+    kill = multiprocessing.process.BaseProcess.kill
+    with pool_module.worker_pool(1) as pool:
+        pool.submit(time.sleep, 60)
+        workers = list(pool._processes.values())
+        monkeypatch.setattr(multiprocessing.process.BaseProcess, "kill", lambda self: None)  # an unkillable worker
+        start = time.monotonic()
+        pool_module._stop_workers(pool)
+        assert time.monotonic() - start < 10
+        monkeypatch.setattr(multiprocessing.process.BaseProcess, "kill", kill)
+        for worker in workers:
+            worker.kill()
+            worker.join()
+    assert f"workers [{workers[0].pid}] did not end within 0.5 s of SIGKILL" in capsys.readouterr().err

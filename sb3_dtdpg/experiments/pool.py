@@ -211,11 +211,16 @@ def run_in_pool(
         raise
 
 
+#: How long :func:`_stop_workers` waits for each killed worker to end
+STOP_TIMEOUT_S = 60.0
+
+
 def _stop_workers(executor: ProcessPoolExecutor) -> None:
     """
     Kill the worker processes of ``executor`` and wait until they are gone. ``shutdown(cancel_futures=True)``
     alone would not stop them: a worker finishes its task and takes the queued ones already sent to it, and the
-    interpreter's exit waits for them.
+    interpreter's exit waits for them. A worker still there :data:`STOP_TIMEOUT_S` after its SIGKILL is left
+    behind with a message (a process in uninterruptible I/O cannot be killed).
     """
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None  # a second Ctrl-C must not cut it short
@@ -225,9 +230,16 @@ def _stop_workers(executor: ProcessPoolExecutor) -> None:
         processes = list((executor._processes or {}).values())
         for process in processes:
             process.kill()
+        stuck = []
         for process in processes:
-            process.join()
-        executor.shutdown(wait=True, cancel_futures=True)
+            process.join(timeout=STOP_TIMEOUT_S)
+            if process.is_alive():  # e.g. in uninterruptible I/O on a hung network disk
+                stuck.append(process.pid)
+        if stuck:
+            print(
+                f"workers {stuck} did not end within {STOP_TIMEOUT_S:g} s of SIGKILL: going on without them", file=sys.stderr
+            )
+        executor.shutdown(wait=not stuck, cancel_futures=True)
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
