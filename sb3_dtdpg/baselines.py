@@ -49,6 +49,7 @@ __all__ = [
     "check_hyperparams",
     "check_training_budget",
     "default_observation_of",
+    "final_reward_phase",
     "hyperparameter",
     "is_mission_env",
     "load_model",
@@ -163,6 +164,19 @@ def reward_phase(algo: str) -> str:
     :return: the env reward phase the algorithm starts in (DT-DPG's curriculum then switches it)
     """
     return "destination" if _check_algo(algo) == "dtdpg" else "combined"
+
+
+def final_reward_phase(model: Any, algo: str) -> str | None:
+    """
+    :param model: a trained model
+    :param algo: its algorithm (one of :data:`ALGORITHMS`)
+    :return: the env reward phase it trained on last: a curriculum's current phase (DT-DPG), else the algorithm's
+        (:func:`reward_phase`); None for a phase that leaves the env's reward alone
+    """
+    phases, state = getattr(model, "phases", None), getattr(model, "curriculum_state", None)
+    if phases and state is not None:
+        return phases[min(int(state["phase_index"]), len(phases) - 1)].reward_phase
+    return reward_phase(algo)
 
 
 def is_mission_env(env_id: str) -> bool:

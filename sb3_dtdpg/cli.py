@@ -418,6 +418,19 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return status
 
 
+def _json_ready(value: Any) -> Any:
+    """:return: ``value`` with numpy numbers as Python ones and non-finite numbers as None (``null``: JSON has no NaN)"""
+    if isinstance(value, dict):
+        return {key: _json_ready(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(item) for item in value]
+    if hasattr(value, "item") and not isinstance(value, (str, bytes)):  # numpy scalars
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def _check_finished_runs(args: argparse.Namespace, specs: Sequence[Any]) -> None:
     """
     ``reproduce --report-only`` draws its tables from the finished runs of ``--out``: refuse a folder (missing or
@@ -546,12 +559,18 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     import pandas as pd
 
+    from sb3_dtdpg.baselines import final_reward_phase
     from sb3_dtdpg.common.files import write_csv, write_text
     from sb3_dtdpg.evaluation import evaluate
     from sb3_dtdpg.experiments import tables
 
     _check_output_files(args, {"--json": args.json, "--csv": args.csv})
     model, env, settings = _saved_model_env(args, args.channel)
+    # The episode returns on the reward the model trained on last, as its run's own evaluation (the MQI is the same)
+    phase = final_reward_phase(model, settings["algo"])
+    if phase is not None and hasattr(env.unwrapped, "set_reward_phase"):
+        env.unwrapped.set_reward_phase(phase)
+        settings["reward_phase"] = phase
     with _user_errors(args):
         result = evaluate(model, env, n_episodes=args.n_episodes, seed=args.seed, deterministic=True)
     env.close()
@@ -566,7 +585,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     tables.print_table(summary, title)
     if args.json:
         document = {"model": str(args.model), "settings": settings, "summary": result.summary(), "episodes": result.episodes}
-        write_text(args.json, json.dumps(document, indent=2, default=float) + "\n")
+        write_text(args.json, json.dumps(_json_ready(document), indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
     if args.csv:
         write_csv(args.csv, pd.DataFrame(result.episodes))

@@ -69,6 +69,14 @@ def test_training_success_is_read_per_episode_from_the_run_log(tmp_path):
     assert paper_task.training_success(tmp_path / "absent")[3] == 0
 
 
+def test_the_paper_claim_is_not_judged_without_training_logs(tmp_path):
+    specs = [s for s in paper_task.paper_task_specs(MICRO, seeds=1, modes=("noma",)) if s.hyperparams == "paper"]
+    results = {spec.run_id: _fake_result(spec, mqi=100.0) for spec in specs}  # no TensorBoard logs written
+    summary = paper_task.paper_task_tables(tmp_path, MICRO, specs, results, progress=False).set_index("algorithm")
+    assert summary.loc["DDPG", "paper_claim"] == "< 20 %: n/a (no training logs)"  # was "does not hold"
+    assert summary.loc["DT-DPG", "paper_claim"] == "> 95 %: n/a (no training logs)"
+
+
 def test_the_table_checks_the_paper_claim_and_pairs_by_seed(tmp_path):
     specs = [s for s in paper_task.paper_task_specs(MICRO, seeds=2, modes=("noma",)) if s.hyperparams == "paper"]
     # DDPG finds the destination in 10 % of its episodes (the paper: < 20 %), DT-DPG in 50 % or 70 % (not > 95 %)

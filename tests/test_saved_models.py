@@ -94,7 +94,11 @@ def test_evaluate_prints_the_compare_table_and_writes_json_and_csv(saved_dtdpg, 
     printed = capsys.readouterr().out
     assert "DT-DPG" in printed and "Success (%)" in printed and "3 episodes" in printed
     assert re.search(r"│\s+0\s+│", printed)  # the Train steps cell: this model never trained
-    document = json.loads(out_json.read_text())
+
+    def no_nan(constant):  # strict JSON readers (jq, JavaScript) refuse NaN and Infinity
+        raise AssertionError(f"{constant} in {out_json}")
+
+    document = json.loads(out_json.read_text(), parse_constant=no_nan)
     assert document["settings"]["scenario"] == "small" and document["settings"]["observation"] == "goal"
     assert document["summary"]["n_episodes"] == 3 and len(document["episodes"]) == 3
     episodes = pd.read_csv(out_csv)
@@ -591,3 +595,26 @@ def test_a_saved_n_step_ddpg_loads_without_sb3s_spurious_buffer_warning(tmp_path
     # A canary: once SB3 stops warning, this fails and load_model's filter can go.
     with pytest.warns(UserWarning, match="is ignored because a custom"):
         DDPG.load(tmp_path / "model.zip", env=small_env())
+
+
+def test_evaluate_scores_the_returns_on_the_reward_the_model_trained_on_last(tmp_path, capsys):
+    # DDPG trains on the "combined" reward: evaluate's returns are on it (were on the env id's "destination" reward).
+    from sb3_dtdpg.evaluation import evaluate
+
+    path = tmp_path / "ddpg.zip"
+    model = DDPG("MlpPolicy", small_env(observation="goal", reward_phase="combined"), learning_starts=10, seed=0)
+    record(model)  # as the CLI's runs do: tested on small
+    model.save(path)
+    out_json, out_csv = tmp_path / "eval.json", tmp_path / "eval.csv"
+    assert main(["evaluate", str(path), "--n-episodes", "2", "--json", str(out_json), "--csv", str(out_csv)]) == 0
+    assert json.loads(out_json.read_text())["settings"]["reward_phase"] == "combined"
+    expected = evaluate(
+        DDPG.load(path), "NomaRadioMap-v0", n_episodes=2, seed=10_000,
+        env_kwargs={"scenario": "small", "observation": "goal", "reward_phase": "combined"},
+    )  # fmt: skip
+    returns = pd.read_csv(out_csv)["episode_return"]
+    assert list(returns) == pytest.approx([e["episode_return"] for e in expected.episodes])
+    destination = evaluate(
+        DDPG.load(path), "NomaRadioMap-v0", n_episodes=2, seed=10_000, env_kwargs={"scenario": "small", "observation": "goal"}
+    )
+    assert list(returns) != pytest.approx([e["episode_return"] for e in destination.episodes])

@@ -57,3 +57,24 @@ def test_plot_statistics_writes_the_three_figures(tmp_path):
     for path in written:
         with Image.open(path) as image:
             assert image.size[0] > 400 and len(np.unique(np.asarray(image.convert("L")))) > 10
+
+
+def test_tables_keep_runs_of_an_unset_setting_and_pair_one_run_per_seed():
+    from sb3_dtdpg.experiments import tables
+
+    records = pd.DataFrame(
+        {
+            "algorithm": ["DDPG", "DDPG", "DT-DPG", "DT-DPG"] * 2,
+            "multiple_access": ["NOMA"] * 4 + ["OMA"] * 4,
+            "seed": [0, 1] * 4,
+            "learning_rate": [float("nan")] * 8,  # the algorithm's default learning rate
+            "mqi": [800.0, 810.0, 820.0, 830.0, 790.0, 800.0, 810.0, 820.0],
+            **{metric: 0.0 for metric in ("success_rate", "outage_steps", "mission_time", "train_timesteps")},
+        }
+    )
+    summary = tables.summarise(records, by=("algorithm", "learning_rate"))
+    assert list(summary["n"]) == [4, 4]  # was empty: the NaN key dropped every run
+    paired = tables.paired_differences(records, "multiple_access", "NOMA", "OMA", by=("algorithm",))
+    assert list(paired["n"]) == [2, 2] and list(paired["mqi"]) == [10.0, 10.0]
+    with pytest.raises(ValueError, match=r"several runs of seeds \[0, 1\] .*add the columns that tell them apart"):
+        tables.paired_differences(records, "multiple_access", "NOMA", "OMA")  # two algorithms per seed and side

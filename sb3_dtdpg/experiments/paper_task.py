@@ -118,9 +118,8 @@ def _summary(records: pd.DataFrame) -> pd.DataFrame:
         if claim is not None:
             side, bar = claim
             value = row["train_success"]
-            row["paper_claim"] = f"{side} {100 * bar:.0f} %: " + (
-                "holds" if (value < bar if side == "<" else value > bar) else "does not hold"
-            )
+            verdict = "holds" if (value < bar if side == "<" else value > bar) else "does not hold"
+            row["paper_claim"] = f"{side} {100 * bar:.0f} %: " + (verdict if np.isfinite(value) else "n/a (no training logs)")
         rows.append(row)
     return pd.DataFrame(rows)
 

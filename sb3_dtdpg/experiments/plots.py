@@ -102,7 +102,8 @@ def _transfer(curves: pd.DataFrame) -> float | None:
 def rolling_curve(log_dir: str | Path, tag: str, window: int) -> pd.Series:
     """
     One run's curve as a learning-curve panel shows it: the per-episode values of ``tag`` and their plain
-    rolling mean over the last ``window`` episodes (fewer at the start). For the success panel
+    rolling mean over the last ``window`` episodes (fewer at the start and after a curriculum transfer, where the
+    window restarts). For the success panel
     (:data:`SUCCESS_TAG`, 1 when all robots arrived) this is the share of successful episodes in the window:
     the test table's success rate, on training episodes. A run logged before ``mission/success`` existed
     falls back to ``mission/success_rate`` as logged (already a rolling rate, so it is not smoothed again).
@@ -112,7 +113,7 @@ def rolling_curve(log_dir: str | Path, tag: str, window: int) -> pd.Series:
     :param window: rolling window in episodes (1: no smoothing)
     :return: the curve indexed by the training episode (empty when the tag is absent)
     """
-    return _rolling(episode_curves(log_dir, list(dict.fromkeys([tag, _LOGGED_SUCCESS_RATE]))), tag, window)[0]
+    return _rolling(episode_curves(log_dir, list(dict.fromkeys([tag, _LOGGED_SUCCESS_RATE, _PHASE_TAG]))), tag, window)[0]
 
 
 def _rolling(curves: pd.DataFrame, tag: str, window: int) -> tuple[pd.Series, bool]:
@@ -120,7 +121,14 @@ def _rolling(curves: pd.DataFrame, tag: str, window: int) -> tuple[pd.Series, bo
     if window < 1:
         raise ValueError(f"window must be a positive number of episodes, got {window!r}")
     if tag != _LOGGED_SUCCESS_RATE and tag in curves and curves[tag].notna().any():
-        return curves[tag].dropna().rolling(window, min_periods=1).mean(), False
+        values = curves[tag].dropna()
+        if _PHASE_TAG not in curves or curves[_PHASE_TAG].isna().all():
+            return values.rolling(window, min_periods=1).mean(), False
+        # The window restarts at a transfer: a mean over both phases would belong to neither (another reward). The
+        # phase logged with an episode is the one after it (the transfer episode logs the new phase): shift by one.
+        logged = curves[_PHASE_TAG].ffill().bfill()
+        played = logged.shift(1).fillna(logged.iloc[0]).reindex(values.index)
+        return values.groupby(played.to_numpy()).transform(lambda v: v.rolling(window, min_periods=1).mean()), False
     if tag in (SUCCESS_TAG, _LOGGED_SUCCESS_RATE) and _LOGGED_SUCCESS_RATE in curves:
         return curves[_LOGGED_SUCCESS_RATE].dropna(), True
     return pd.Series(dtype=float), False

@@ -102,7 +102,7 @@ def summarise(records: pd.DataFrame, by: Sequence[str] = ("algorithm", "multiple
         scenario's ``t_total``) and ``train_timesteps`` (mean)
     """
     rows = []
-    for key, group in records.groupby(list(by), sort=False):
+    for key, group in records.groupby(list(by), sort=False, dropna=False):  # a NaN setting is a configuration too
         row: dict[str, Any] = dict(zip(by, key if isinstance(key, tuple) else (key,), strict=False))
         row["n"] = len(group)
         row["ci_over"] = "seeds"
@@ -137,11 +137,20 @@ def paired_differences(
     :param metrics: the metrics to difference
     :return: one row per configuration with at least one pair: the ``by`` columns, ``contrast`` (text),
         ``n`` (pairs), ``<metric>`` (mean difference) and ``<metric>_ci`` columns
+    :raises ValueError: a side has several runs of one seed in a configuration (``by`` misses a column)
     """
     rows = []
     groups = records.groupby(list(by), sort=False, dropna=False) if by else [((), records)]
     for key, group in groups:
         sides = [group[group[contrast] == value].set_index("seed") for value in (first, second)]
+        for side, value in zip(sides, (first, second), strict=True):
+            if not side.index.is_unique:  # pairs by seed need one run per seed and side
+                repeated = sorted(set(side.index[side.index.duplicated()]))
+                raise ValueError(
+                    f"by: {contrast}={value!r} has several runs of seeds {repeated} in one configuration "
+                    f"{dict(zip(by, key if isinstance(key, tuple) else (key,), strict=False))}: add the columns that "
+                    "tell them apart to by"
+                )
         seeds = sorted(set(sides[0].index) & set(sides[1].index))
         if not seeds:
             continue
