@@ -126,13 +126,16 @@ def test_a_curve_restarts_its_window_at_the_transfer(tmp_path):
     # Episodes 1-3 in the first phase (the third transfers and logs phase 1), 4-6 in the second, another reward.
     logger = configure(str(tmp_path), ["tensorboard"])
     for episode, (value, phase) in enumerate([(100, 0), (110, 0), (120, 1), (-50, 1), (-40, 1), (-30, 1)], start=1):
+        logger.record("episode/return", float(value))
         logger.record("mission/mqi", float(value))
         logger.record("curriculum/phase", phase)
         logger.record("episode/number", episode)
         logger.dump(step=10 * episode)
     logger.close()
-    curve = plots.rolling_curve(tmp_path, "mission/mqi", window=3)
+    curve = plots.rolling_curve(tmp_path, plots.RETURN_TAG, window=3)
     assert list(curve) == [100.0, 105.0, 110.0, -50.0, -45.0, -40.0]  # was (110 + 120 - 50) / 3 = 60 at episode 4
+    # the MQI keeps its meaning across the transfer: one window over both phases
+    assert plots.rolling_curve(tmp_path, "mission/mqi", window=3)[4] == pytest.approx(60.0)
 
 
 def test_learning_curves_state_the_window_and_stay_in_range(tmp_path):

@@ -39,6 +39,8 @@ EPISODES_TAG = "episode/number"
 SUCCESS_TAG = "mission/success"
 _LOGGED_SUCCESS_RATE = "mission/success_rate"
 _PHASE_TAG = "curriculum/phase"
+#: The training return on the phase's own reward: its scale changes at a transfer (MQI and success do not)
+RETURN_TAG = "episode/return"
 
 
 #: Policy colours on the SINR map: none is the outage red, the obstacles' white or the interferers' orange.
@@ -102,8 +104,8 @@ def _transfer(curves: pd.DataFrame) -> float | None:
 def rolling_curve(log_dir: str | Path, tag: str, window: int) -> pd.Series:
     """
     One run's curve as a learning-curve panel shows it: the per-episode values of ``tag`` and their plain
-    rolling mean over the last ``window`` episodes (fewer at the start and after a curriculum transfer, where the
-    window restarts). For the success panel
+    rolling mean over the last ``window`` episodes (fewer at the start; for the return, :data:`RETURN_TAG`, also
+    after a curriculum transfer, where the reward changes and the window restarts). For the success panel
     (:data:`SUCCESS_TAG`, 1 when all robots arrived) this is the share of successful episodes in the window:
     the test table's success rate, on training episodes. A run logged before ``mission/success`` existed
     falls back to ``mission/success_rate`` as logged (already a rolling rate, so it is not smoothed again).
@@ -122,7 +124,7 @@ def _rolling(curves: pd.DataFrame, tag: str, window: int) -> tuple[pd.Series, bo
         raise ValueError(f"window must be a positive number of episodes, got {window!r}")
     if tag != _LOGGED_SUCCESS_RATE and tag in curves and curves[tag].notna().any():
         values = curves[tag].dropna()
-        if _PHASE_TAG not in curves or curves[_PHASE_TAG].isna().all():
+        if tag != RETURN_TAG or _PHASE_TAG not in curves or curves[_PHASE_TAG].isna().all():
             return values.rolling(window, min_periods=1).mean(), False
         # The window restarts at a transfer: a mean over both phases would belong to neither (another reward). The
         # phase logged with an episode is the one after it (the transfer episode logs the new phase): shift by one.

@@ -485,7 +485,7 @@ def _figures(
         for file, tag, title in (
             (
                 "fig_reward_learning_rates.png",
-                ("episode/return", "reward per episode (phase reward)"),
+                (plots.RETURN_TAG, "reward per episode (phase reward)"),
                 f"DT-DPG reward per episode, two learning rates\n({where}; dotted: transfer)",
             ),
             (
