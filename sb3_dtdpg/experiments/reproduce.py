@@ -499,14 +499,17 @@ def _figures(
         plots.plot_learning_curves(
             groups, out / "fig_ddpg_vs_dtdpg.png", title=f"DDPG vs DT-DPG (radio-map training; {where})"
         )
-    first = {}
+    first, panel_of = {}, {}  # per mode, the first finished DT-DPG run, named with its seed (a failed seed: another)
     for spec in experiments["ddpg_vs_dtdpg"]:
         result = results[spec.run_id]
         if spec.algo == "dtdpg" and result is not None and spec.multiple_access not in first:
             first[spec.multiple_access] = result
-    panels = {mode.upper(): {"DT-DPG": r["eval"]["trajectories"][0]} for mode, r in first.items() if r["eval"]["trajectories"]}
+            panel_of[spec.multiple_access] = f"{spec.multiple_access.upper()}, seed {spec.seed}"
+    panels = {
+        panel_of[mode]: {"DT-DPG": r["eval"]["trajectories"][0]} for mode, r in first.items() if r["eval"]["trajectories"]
+    }
     goals = {
-        mode.upper(): plots.episode_destinations(r["eval"]["episodes"][0]) if r["eval"]["episodes"] else None
+        panel_of[mode]: plots.episode_destinations(r["eval"]["episodes"][0]) if r["eval"]["episodes"] else None
         for mode, r in first.items()
     }
     if panels:
@@ -520,7 +523,7 @@ def _figures(
     transfer = {}
     for mode, result in first.items():
         if "before_transfer" in result and result["before_transfer"]["trajectories"]:
-            transfer[mode.upper()] = {
+            transfer[panel_of[mode]] = {
                 "before transfer": result["before_transfer"]["trajectories"][0],
                 "after transfer": result["eval"]["trajectories"][0],
             }
