@@ -59,7 +59,14 @@ def test_an_interrupted_job_stops_its_workers_before_it_releases_its_lock(tmp_pa
     script.write_text(JOB)
     (out / "started").mkdir(parents=True)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    job = subprocess.Popen([sys.executable, str(script), str(out)], env=env, start_new_session=True)
+    # SIGINT at its default in the job even where the test runs with it ignored (a shell's background job): Python
+    # then raises KeyboardInterrupt on it, as in a terminal
+    job = subprocess.Popen(
+        [sys.executable, str(script), str(out)],
+        env=env,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         marker, deadline = out / "started" / "r0", time.monotonic() + 60
         while not marker.exists():
