@@ -184,8 +184,7 @@ def run_in_pool(
         with _sigterm_raises(), RunBars(out, len(jobs), enabled=progress) as bars:
             if not jobs:
                 return
-            executor = worker_pool(n_workers)
-            try:
+            with worker_pool(n_workers) as executor:  # left by an exception: its workers are killed first
                 pending = {executor.submit(work, *job): job[0] for job in jobs}
                 while pending:
                     done, _ = wait(pending, timeout=2.0 if progress else None, return_when=FIRST_COMPLETED)
@@ -201,10 +200,6 @@ def run_in_pool(
                         except Exception as error:  # a failed run must not take the others down
                             report.failed[spec.run_id] = failure_message(error)
                             bars.finished(spec.run_id, f"{spec.run_id} FAILED")
-            except BaseException:
-                _stop_workers(executor)
-                raise
-            executor.shutdown()
     except _Terminated:
         # The workers are gone and the bars closed: now SIGTERM's default action (the handler is restored).
         signal.raise_signal(signal.SIGTERM)
