@@ -418,19 +418,6 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return status
 
 
-def _json_ready(value: Any) -> Any:
-    """:return: ``value`` with numpy numbers as Python ones and non-finite numbers as None (``null``: JSON has no NaN)"""
-    if isinstance(value, dict):
-        return {key: _json_ready(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_ready(item) for item in value]
-    if hasattr(value, "item") and not isinstance(value, (str, bytes)):  # numpy scalars
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def _check_finished_runs(args: argparse.Namespace, specs: Sequence[Any]) -> None:
     """
     ``reproduce --report-only`` draws its tables from the finished runs of ``--out``: refuse a folder (missing or
@@ -555,12 +542,10 @@ def _check_output_files(args: argparse.Namespace, outputs: dict[str, str | None]
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    import json
-
     import pandas as pd
 
     from sb3_dtdpg.baselines import final_reward_phase
-    from sb3_dtdpg.common.files import write_csv, write_text
+    from sb3_dtdpg.common.files import write_csv, write_json
     from sb3_dtdpg.evaluation import evaluate
     from sb3_dtdpg.experiments import tables
 
@@ -585,7 +570,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     tables.print_table(summary, title)
     if args.json:
         document = {"model": str(args.model), "settings": settings, "summary": result.summary(), "episodes": result.episodes}
-        write_text(args.json, json.dumps(_json_ready(document), indent=2, allow_nan=False) + "\n")
+        write_json(args.json, document, indent=2, strict=True)
         print(f"wrote {args.json}")
     if args.csv:
         write_csv(args.csv, pd.DataFrame(result.episodes))

@@ -363,6 +363,16 @@ def test_a_resumed_runs_csv_keeps_its_whole_rows_up_to_the_checkpoint(tmp_path, 
 
 
 # ---------------------------------------------------------------------------------------------- files
+def test_strict_json_writes_non_finite_numbers_as_null(tmp_path):
+    import numpy as np
+
+    from sb3_dtdpg.common.files import write_json
+
+    data = {"a": np.float32("nan"), "b": [1.0, float("inf")], "c": np.array([np.nan, 2.0]), "d": np.int64(3)}
+    write_json(tmp_path / "x.json", data, strict=True)
+    assert json.loads((tmp_path / "x.json").read_text()) == {"a": None, "b": [1.0, None], "c": [None, 2.0], "d": 3}
+
+
 def test_atomic_write_leaves_no_temp_file_when_interrupted(tmp_path):
     target = tmp_path / "model.zip"
     target.write_bytes(b"old")

@@ -85,16 +85,30 @@ def json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def write_json(path: str | os.PathLike[str], data: Any, indent: int | None = None) -> Path:
+def write_json(path: str | os.PathLike[str], data: Any, indent: int | None = None, strict: bool = False) -> Path:
     """
     Write a JSON file atomically (:func:`atomic_write`): a reader sees the complete record or the previous one.
 
     :param path: the target file
     :param data: the record (numpy values allowed, :func:`json_default`)
     :param indent: ``json.dumps``'s indent
+    :param strict: write non-finite numbers as ``null`` (JSON has no NaN; strict readers refuse Python's ``NaN``)
     :return: the target path
     """
+    if strict:
+        return write_text(path, json.dumps(_finite(data), indent=indent, default=json_default, allow_nan=False))
     return write_text(path, json.dumps(data, indent=indent, default=json_default))
+
+
+def _finite(value: Any) -> Any:
+    """:return: ``value`` with every non-finite number (also in numpy arrays) replaced by None"""
+    if isinstance(value, dict):
+        return {key: _finite(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_finite(item) for item in (value.tolist() if isinstance(value, np.ndarray) else value)]
+    if isinstance(value, (float, np.floating)) and not np.isfinite(value):
+        return None
+    return value
 
 
 def write_text(path: str | os.PathLike[str], text: str) -> Path:
