@@ -95,7 +95,7 @@ PLANNER_DIGESTS: dict[str, str] = {
 EXPECTED: dict[str, dict] = {
     "x86-64-v3": {
         # The rollouts and the radio map of `mall` are not recorded on this kind: `mall` was recalibrated on
-        # 2026-12-03 (docs/SCENARIOS.md) on an AVX-512 machine; record them on an AVX2 one.
+        # 2026-12-06 (docs/SCENARIOS.md) on an AVX-512 machine; record them on an AVX2 one.
         "rollouts": {
             "small": "4fae27defa682ea8a11516fc36d51279234c83b9d491f6d654569a9b16cc77b1",
             "small_combined_geodesic": "c1f9a245226986aa959a9b9d3fcd9f4920bcaeecc1781dc8a5b8d4a58e5fd839",
@@ -108,16 +108,16 @@ EXPECTED: dict[str, dict] = {
     },
     "x86-64-v4": {
         "rollouts": {
-            "noma": "d17a99306b8b97939979ee4ff1d9b2f83c7876fea650acf6b7df34a0ebc8cf44",
-            "oma": "702a711a24b155503af7487cdc0e6b0baa74f311b6d37dbeb0cdc430dbf9790b",
-            "noma_rayleigh": "48eaf4f618df6b8a0df395fe746af2b694090c95206c9f757b639aa70b5fe584",
-            "oma_rayleigh": "098c9e28ccff860fddb87b2f83323a695e0a1e9e81aa7c0f2f9541b0bc0fe9ea",
+            "noma": "2c823e82388caf4cdba6f15ba5944e850ef667caa290b217100902a2c2b99f6c",
+            "oma": "0ac34ac54933cfc27a3d963861178653141f30686a6079a576287755c94c2fbd",
+            "noma_rayleigh": "b5b8315b75713be7fd60c366c21f7f6e2311cae85d80ee201c2e4fa7b22bc8a5",
+            "oma_rayleigh": "2f4781353e4e902dace6beb4a870bd612a8582c442eecaebc17a53205064122f",
             "small": "e9699c5db1a99505f12c79474302ed7d6542fd44d3a3d546b4b527801d5ad58b",
             "small_combined_geodesic": "b3a905d1ce9f7f30a82a993d041a05d930f0f6c98bdb9fe1a713b444935ed512",
-            "mqi": "85daeb659fc714dbfd6feb291214fed5ec933f37b90ca9d8902d86a0241e1fc8",
+            "mqi": "d267664b678da31a0963224f34516d3eb8daf13d738f3e480468713321a3cf1f",
         },
         "maps": {
-            "mall": "9010d68270a51c0672424ddb37e1e76bc39cf3c46b0e24a2766c54716e87b951",
+            "mall": "fee363b5d4607bd8bb8b957ceab90348a0975ead0fed9ea58ad11abd8dcc7990",
             "small": "af596e12ed6b715f0e374d3f79fcf86a428fc1035f59588273d42efb9a7108df",
         },
         "planners": {

@@ -131,29 +131,35 @@ def test_outage_share_in_range(name):
     assert share == pytest.approx(radio_map.outage_map()[~radio_map.blocked].sum() / (~radio_map.blocked).sum())
 
 
+def _length_and_outage_metres(cells: np.ndarray, outage: np.ndarray, resolution: float) -> tuple[float, float]:
+    """A grid path's length and the metres of it in outage cells (a step's outage shared by its two cells)."""
+    step = resolution * np.hypot(*np.diff(cells, axis=0).T)
+    in_outage = 0.5 * (outage[cells[:-1, 0], cells[:-1, 1]] + outage[cells[1:, 0], cells[1:, 1]])
+    return float(step.sum()), float(step @ in_outage)
+
+
 @pytest.mark.parametrize("name", COMMUNICATION_MATTERS)
-def test_shortest_path_crosses_outage_but_a_detour_avoids_it(name):
-    # docs/SCENARIOS.md: for at least one robot (and destination), every shortest path from the start region to
-    # the destination crosses outage cells, while a path avoiding them exists and is at most 1.5 x as long.
+def test_shortest_path_crosses_outage_and_a_short_detour_cuts_most_of_it(name):
+    # docs/SCENARIOS.md: for at least one robot (and destination), from every cell of its start region each shortest
+    # path runs through outage cells, while a path at most 1.5 x as long spends at most a quarter as many metres there.
     radio_map = RadioMap.for_scenario(load_scenario(name))
     scenario, res = radio_map.scenario, radio_map.resolution
-    outage = radio_map.outage_map()
+    outage = radio_map.outage_map().astype(np.float64)
     found = []
     for u, robot in enumerate(scenario.robots):
-        starts = radio_map.start_cells(u)
         for destination in robot.destinations:
             goal = tuple(int(i) for i in radio_map.cell_index(np.array(destination)))
-            shortest = G.grid_distance_field(radio_map.blocked, goal, res)[starts[:, 0], starts[:, 1]]
-            avoiding = G.grid_distance_field(radio_map.blocked | outage, goal, res)[starts[:, 0], starts[:, 1]]
-            if np.all((avoiding > shortest + 1e-9) & (avoiding <= 1.5 * shortest)):
+            holds = True
+            for start in radio_map.start_cells(u):
+                # the shortest path with the fewest outage metres, and the path of least length + outage metres
+                shortest, _ = G.shortest_path(radio_map.blocked, tuple(start), goal, cost=1e-6 * outage, resolution=res)
+                detour, _ = G.shortest_path(radio_map.blocked, tuple(start), goal, cost=outage, resolution=res)
+                short_length, short_outage = _length_and_outage_metres(shortest, outage, res)
+                detour_length, detour_outage = _length_and_outage_metres(detour, outage, res)
+                holds &= short_outage > 0 and detour_length <= 1.5 * short_length and detour_outage <= short_outage / 4
+            if holds:
                 found.append((u, destination))
-    assert found, "no robot/destination where the shortest path must cross outage cells but a short detour avoids them"
-    # and the shortest path found explicitly does cross outage cells
-    u, destination = found[0]
-    start = radio_map.start_cells(u)[0]
-    goal = tuple(int(i) for i in radio_map.cell_index(np.array(destination)))
-    cells, _ = G.shortest_path(radio_map.blocked, tuple(start), goal, resolution=res)
-    assert outage[cells[:, 0], cells[:, 1]].any()
+    assert found, "no robot/destination whose shortest paths cross outage cells while a short detour cuts most of it"
 
 
 def test_small_blocked_cells(small):

@@ -1,7 +1,8 @@
 """The default room poses the paper's problem (docs/SCENARIOS.md, "mall calibration"): on the test missions of
 ``sb3-dtdpg compare`` path design pays (the best planner beats the shortest paths with their best power split)
-and NOMA pays (the best planner's NOMA beats its OMA), by the bars of the spec on the radio-map channel; on it the
-best planner never loses a mission to the shortest path, and never scores above the upper bound."""
+and NOMA pays (the best planner's NOMA beats its OMA), by the bars of the spec on the radio-map channel, path design
+by its bar with Rayleigh fading too; on the radio-map channel the best planner never loses a mission to the
+shortest path, and never scores above the upper bound."""
 
 import gymnasium as gym
 import numpy as np
@@ -76,9 +77,10 @@ def test_path_design_and_noma_pay_on_the_default_room(scores):
 
 
 def test_path_design_and_noma_pay_with_rayleigh_fading(scores):
-    # The compare table's channel. Both pay, by less: see the next test for why NOMA cannot pay 25 here.
+    # The compare table's channel. Path design pays by the bar here too (the sign's shadow on the shortest paths is
+    # noise-limited, which fading cannot blur); NOMA pays by less: see the next test for why it cannot pay 25 here.
     best_noma = scores["rayleigh", "noma", BEST_PLANNER].mqi_mean
-    assert best_noma > scores["rayleigh", "noma", SHORTEST_PATH_PLANNER].mqi_mean
+    assert best_noma - scores["rayleigh", "noma", SHORTEST_PATH_PLANNER].mqi_mean >= MIN_PATH_MARGIN
     assert best_noma > scores["rayleigh", "oma", BEST_PLANNER].mqi_mean
     assert scores["rayleigh", "oma", BEST_PLANNER].mqi_mean > scores["rayleigh", "oma", SHORTEST_PATH_PLANNER].mqi_mean
 
@@ -87,7 +89,7 @@ def test_no_room_gives_noma_25_over_oma_with_rayleigh_fading_on_missions_this_sh
     # docs/SCENARIOS.md ("mall calibration"): with Rayleigh fading on every link, the best NOMA split saves at most
     # ~0.33 expected outages per step over the best OMA split at the same positions (one robot at ~6.9 dB, noise-
     # limited; interference only lowers it), so NOMA* - OMA* <= 0.33 x mission time: the 25 MQI bar needs missions
-    # of >= 25 / 0.33 ~ 77 steps, 1.7 times this room's 44 (and longer than any shortest path from its start areas).
+    # of >= 25 / 0.33 ~ 77 steps, 1.7 times this room's 45 (and longer than any shortest path from its start areas).
     scenario = gym.make("NomaRadioMap-v0").unwrapped.scenario
     radio = scenario.radio
     max_power_w = float(dbm_to_watt(scenario.ap.max_power_dbm))
@@ -161,6 +163,7 @@ def test_the_compare_table_prints_the_margins_of_the_default_room(scores, best_p
         assert margins[f"path {channel}"] == pytest.approx(best - mqi[channel, "noma", SHORTEST_PATH_PLANNER])
         assert margins[f"noma {channel}"] == pytest.approx(best - mqi[channel, "oma", BEST_PLANNER])
     assert margins["path radio_map"] >= MIN_PATH_MARGIN and margins["noma radio_map"] >= MIN_NOMA_MARGIN
+    assert margins["path rayleigh"] >= MIN_PATH_MARGIN
     line = format_room_margins(margins)
     assert f"{margins['path radio_map']:+.1f} / {margins['path rayleigh']:+.1f}" in line
     assert f"{margins['noma radio_map']:+.1f} / {margins['noma rayleigh']:+.1f}" in line
@@ -220,21 +223,3 @@ def test_the_tables_gap_is_the_best_planners_distance_from_the_bound_on_the_radi
         assert table.loc[mode.upper(), "mqi_radio_map"] == on_radio_map != table.loc[mode.upper(), "mqi"]
         assert table.loc[mode.upper(), "mqi_gap"] == pytest.approx(table.loc[mode.upper(), "mqi_bound"] - on_radio_map)
         assert table.loc[mode.upper(), "mqi_gap"] >= 0
-
-
-@pytest.mark.slow  # ~12 s: five planner evaluations on a room of its own (benchmarks/room_calibration.py measures it too)
-def test_a_room_of_table_one_meets_the_path_bar_with_fading_too(test_missions):
-    # benchmarks/rooms/mall_banner.yaml (docs/SCENARIOS.md): mall with a noise-limited shadow on the shortest paths.
-    from pathlib import Path
-
-    room = str(Path(__file__).resolve().parents[1] / "benchmarks" / "rooms" / "mall_banner.yaml")
-    best, shortest = ReferencePlanner(), ShortestPathPlanner(**PLANNERS[SHORTEST_PATH_PLANNER][1])
-    mqi = {}
-    for channel, mode in (("radio_map", "noma"), ("radio_map", "oma"), ("rayleigh", "noma")):
-        env = gym.make("NomaRadioMap-v0", scenario=room, channel=channel, multiple_access=mode)
-        mqi[channel, mode] = evaluate(best, env, **test_missions).mqi_mean
-        if mode == "noma":
-            mqi[channel, "shortest"] = evaluate(shortest, env, **test_missions).mqi_mean
-    assert mqi["radio_map", "noma"] - mqi["radio_map", "shortest"] >= MIN_PATH_MARGIN
-    assert mqi["radio_map", "noma"] - mqi["radio_map", "oma"] >= MIN_NOMA_MARGIN
-    assert mqi["rayleigh", "noma"] - mqi["rayleigh", "shortest"] >= MIN_PATH_MARGIN
