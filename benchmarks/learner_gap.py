@@ -23,6 +23,7 @@ fading a policy sees the faded gains it acts on, so no split computed from the m
 Usage::
 
     python benchmarks/learner_gap.py results/compare [--episodes 20] [--csv gap.csv] [--figure gap.png]
+    python benchmarks/learner_gap.py results/paper --runs '*_radio_map_500_tuned_goal'  # one experiment of reproduce
     python benchmarks/learner_gap.py --from-csv a.csv b.csv --labels "500 episodes" "2000 episodes" --figure gap.png
 
 The figure draws each learner's MQI with its own split and, stacked on it, what it loses to its split (the top of
@@ -145,14 +146,16 @@ def _model_env(path: Path) -> tuple[Any, gym.Env, dict[str, Any], dict[str, Any]
     return saved.load(env), env, {**(saved.settings or {}), "algo": saved.algo}, kwargs
 
 
-def measure(out: Path, episodes: int, seed: int) -> pd.DataFrame:
+def measure(out: Path, episodes: int, seed: int, runs: str = "*") -> pd.DataFrame:
     """
+    :param runs: a glob pattern of the run folders to measure (``reproduce`` keeps several experiments' runs in one
+        folder, which the table would otherwise pool by algorithm and mode)
     :return: one row per policy (model or planner) and test mission, with the columns of :func:`mission_splits`
     """
     rows: list[dict[str, Any]] = []
-    models = sorted(out.glob("runs/*/model.zip"))
+    models = sorted(out.glob(f"runs/{runs}/model.zip"))
     if not models:
-        raise SystemExit(f"no models in {out}/runs/*/model.zip: give the output folder of compare or reproduce")
+        raise SystemExit(f"no models in {out}/runs/{runs}/model.zip: give the output folder of compare or reproduce")
     envs: dict[str, dict[str, Any]] = {}
     for path in models:
         model, env, settings, kwargs = _model_env(path)
@@ -240,6 +243,9 @@ def main() -> None:
     parser.add_argument("out", type=Path, nargs="?", help="output folder of compare or reproduce (its runs/*/model.zip)")
     parser.add_argument("--episodes", type=int, default=20, help="test missions (default: 20, as compare)")
     parser.add_argument("--seed", type=int, default=10_000, help="reset seed of test mission 0 (default: 10000)")
+    parser.add_argument(
+        "--runs", default="*", help="only the run folders matching this glob pattern, e.g. '*_radio_map_500_tuned_goal'"
+    )
     parser.add_argument("--csv", type=Path, default=None, help="write one row per policy and mission here")
     parser.add_argument("--figure", type=Path, default=None, help="draw the split here (.png)")
     parser.add_argument("--from-csv", type=Path, nargs="+", default=None, help="CSVs of earlier runs of --csv, instead of out")
@@ -251,7 +257,7 @@ def main() -> None:
             parser.error(f"--labels: {len(labels)} labels for {len(args.from_csv)} --from-csv files")
         frames = {label: pd.read_csv(path) for label, path in zip(labels, args.from_csv, strict=True)}
     elif args.out is not None:
-        frames = {args.out.name: measure(args.out, args.episodes, args.seed)}
+        frames = {args.out.name: measure(args.out, args.episodes, args.seed, args.runs)}
     else:
         parser.error("give an output folder of compare or reproduce, or --from-csv")
     for label, missions in frames.items():

@@ -63,6 +63,19 @@ def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
     assert list(summary["algo"]) == ["dtdpg", "ddpg"] and list(summary["train_success"].str[:4]) == ["75.0", "50.0"]
 
 
+def test_learner_gap_measures_only_the_run_folders_of_its_pattern(tmp_path):
+    # reproduce keeps several experiments' runs in one folder; --runs picks one experiment's (the table pools by
+    # algorithm and mode): a folder matching no pattern is never loaded (this one's model is not a zip)
+    gap = load_script("learner_gap")
+    run = tmp_path / "runs" / "dtdpg_noma_s0_radio_map_500_lr0.0001_tuned_goal"
+    run.mkdir(parents=True)
+    (run / "model.zip").write_bytes(b"not a model")
+    with pytest.raises(SystemExit, match=r"no models in .*runs/\*_500_tuned_goal/model\.zip"):
+        gap.measure(tmp_path, 1, 0, runs="*_500_tuned_goal")
+    with pytest.raises(Exception, match="zip"):  # matched: loaded
+        gap.measure(tmp_path, 1, 0, runs="*_lr0.0001_tuned_goal")
+
+
 def test_learner_gap_splits_a_policy_s_mqi_into_its_path_and_its_power_split():
     # The decomposition of benchmarks/learner_gap.py: the shortest paths with the exact best split lose nothing to
     # their split; with the radio-blind equal split they lose what the best split on the same positions gains.
