@@ -71,8 +71,8 @@ class Budget:
 #: home on the test missions (measured, docs/BENCHMARKS.md); ``default`` fits ``compare`` in <= 15 minutes on a
 #: 2-core machine (docs/RESULTS.md); ``mall-200`` and ``small-200`` are the paper's experiments with 200/280
 #: episodes instead of 500/700 on ``mall`` and on ``small`` (``small-200``: what a 2-core machine runs in about an
-#: hour, docs/RESULTS.md); ``paper`` is the paper's scale; ``paper-x4`` four times its training episodes (what the
-#: learners' power split needs, docs/RESULTS.md). ``_micro`` is for the tests.
+#: hour, docs/RESULTS.md); ``paper`` is the paper's scale; ``paper-x4`` four times its training episodes (where the
+#: learners begin to use the radio map, docs/RESULTS.md). ``_micro`` is for the tests.
 BUDGETS: dict[str, Budget] = {
     "_micro": Budget("_micro", episodes=3, long_episodes=4, eval_episodes=2, seeds=2, scenario="small"),
     "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small", paper_task_episodes=3),
