@@ -78,7 +78,7 @@ def test_path_design_and_noma_pay_on_the_default_room(scores):
 
 def test_path_design_and_noma_pay_with_rayleigh_fading(scores):
     # The compare table's channel. Path design pays by the bar here too (the banner's shadow on the shortest paths is
-    # noise-limited, which fading cannot blur); NOMA pays by less: see the next test for why it cannot pay 25 here.
+    # too deep for fading to blur); NOMA pays by less: see the next test for why it cannot pay 25 here.
     best_noma = scores["rayleigh", "noma", BEST_PLANNER].mqi_mean
     assert best_noma - scores["rayleigh", "noma", SHORTEST_PATH_PLANNER].mqi_mean >= MIN_PATH_MARGIN
     assert best_noma > scores["rayleigh", "oma", BEST_PLANNER].mqi_mean
