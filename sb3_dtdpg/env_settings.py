@@ -26,6 +26,7 @@ from typing import Any
 
 __all__ = [
     "CHECKED",
+    "RETIRED_BUILTINS",
     "SETTINGS",
     "EnvSettingsMismatch",
     "builtin_scenario_digest",
@@ -111,6 +112,13 @@ def scenario_digest(scenario: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+#: Built-in rooms since recalibrated, by content digest: the file of the repository that keeps each (docs/SCENARIOS.md),
+#: named in messages so that a model trained on one finds its room.
+RETIRED_BUILTINS: dict[str, str] = {
+    "19f0d709de115dbcc329fccb569f63970e27d1a9b99cf3ba244392f0912c1470": "benchmarks/rooms/mall_2026-12-03.yaml",
+}
+
+
 @functools.cache
 def builtin_scenario_digest(name: str) -> str | None:
     """:return: the :func:`scenario_digest` of the built-in scenario ``name``, None where no built-in has that name"""
@@ -137,6 +145,8 @@ def describe_scenario(settings: Mapping[str, Any]) -> str:
         where = f"from {file}"
     elif digest == builtin_scenario_digest(str(settings.get("scenario"))):
         where = "the built-in scenario"
+    elif digest in RETIRED_BUILTINS:
+        where = f"the built-in scenario before its recalibration, kept as {RETIRED_BUILTINS[digest]} in the repository"
     else:
         where = "not from a file"
     return f"{where}, content sha256 {digest[:12]}"
@@ -216,10 +226,15 @@ def infer_observation(n_values: int, n_robots: int) -> str | None:
 def _make_call(settings: dict[str, Any]) -> str:
     """The ``gymnasium.make`` call of an env with these settings (the paper's power mapping, the default, left out)."""
     shown = {key: settings.get(key) for key in CHECKED if settings.get(key) not in (None, _DEFAULTS.get(key))}
-    if settings.get("scenario_file"):  # a scenario of a file: the file builds it, its name would be the built-in
-        shown["scenario"] = settings["scenario_file"]
+    if _scenario_file_of(settings):  # a scenario of a file: the file builds it, its name would be the built-in
+        shown["scenario"] = _scenario_file_of(settings)
     arguments = ", ".join(f"{key}={value!r}" for key, value in shown.items())
     return f'gym.make("NomaRadioMap-v0", {arguments})'
+
+
+def _scenario_file_of(settings: dict[str, Any]) -> str | None:
+    """The file that builds the recorded scenario: the one it was read from, or the kept file of a retired built-in."""
+    return settings.get("scenario_file") or RETIRED_BUILTINS.get(str(settings.get("scenario_digest")))
 
 
 def _differs(key: str, recorded: dict[str, Any], actual: dict[str, Any]) -> bool:
@@ -252,7 +267,7 @@ def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the m
         return
     differences = [_difference(key, recorded, actual) for key in CHECKED if _differs(key, recorded, actual)]
     if differences:
-        scenario_option = f"--scenario {recorded['scenario_file']} " if recorded.get("scenario_file") else ""
+        scenario_option = f"--scenario {_scenario_file_of(recorded)} " if _scenario_file_of(recorded) else ""
         raise EnvSettingsMismatch(
             f"{what} was trained with {', '.join(differences)}; build the env with those settings, e.g. "
             f"{_make_call(recorded)} (sb3-dtdpg: {scenario_option}--observation {recorded.get('observation')} "

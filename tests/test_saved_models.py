@@ -484,8 +484,11 @@ def test_a_model_of_the_mall_before_its_recalibration_is_refused_on_mall_and_tak
     model = DTDPG.load(path)  # without an env, saving keeps the recorded settings
     model.env_settings = {**model.env_settings, "scenario_file": None}  # as a model of the built-in recorded them
     model.save(path)
-    with pytest.raises(EnvSettingsMismatch, match="another room of the same name"):
+    with pytest.raises(EnvSettingsMismatch, match="another room of the same name") as error:
         DTDPG.load(path, env=gym.make("NomaRadioMap-v0"))
+    kept = "benchmarks/rooms/mall_2026-12-03.yaml"
+    assert f"before its recalibration, kept as {kept}" in str(error.value)  # the message names the kept file
+    assert f"scenario='{kept}'" in str(error.value) and f"--scenario {kept} " in str(error.value)
     DTDPG.load(path, env=gym.make("NomaRadioMap-v0", scenario=str(room)))
 
 
