@@ -226,8 +226,8 @@ def infer_observation(n_values: int, n_robots: int) -> str | None:
 def _make_call(settings: dict[str, Any]) -> str:
     """The ``gymnasium.make`` call of an env with these settings (the paper's power mapping, the default, left out)."""
     shown = {key: settings.get(key) for key in CHECKED if settings.get(key) not in (None, _DEFAULTS.get(key))}
-    if _scenario_file_of(settings):  # a scenario of a file: the file builds it, its name would be the built-in
-        shown["scenario"] = _scenario_file_of(settings)
+    if file := _scenario_file_of(settings):  # a scenario of a file: the file builds it, its name would be the built-in
+        shown["scenario"] = file
     arguments = ", ".join(f"{key}={value!r}" for key, value in shown.items())
     return f'gym.make("NomaRadioMap-v0", {arguments})'
 
@@ -267,7 +267,8 @@ def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the m
         return
     differences = [_difference(key, recorded, actual) for key in CHECKED if _differs(key, recorded, actual)]
     if differences:
-        scenario_option = f"--scenario {_scenario_file_of(recorded)} " if _scenario_file_of(recorded) else ""
+        file = _scenario_file_of(recorded)
+        scenario_option = f"--scenario {file} " if file else ""
         raise EnvSettingsMismatch(
             f"{what} was trained with {', '.join(differences)}; build the env with those settings, e.g. "
             f"{_make_call(recorded)} (sb3-dtdpg: {scenario_option}--observation {recorded.get('observation')} "
