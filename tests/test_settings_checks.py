@@ -150,3 +150,20 @@ def test_a_run_spec_with_an_unknown_override_is_refused_before_training():
         ValueError, match=r"unknown hyperparameter 'gamam' for DTDPG \(RunSpec.overrides\); did you mean 'gamma'"
     ):
         run_identity(spec)
+
+
+def test_an_action_noise_of_another_shape_is_refused_at_construction():
+    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise, VectorizedActionNoise
+
+    env = make_env("dtdpg", env_kwargs={"scenario": "small"})
+    shape = env.action_space.shape
+    wrong = NormalActionNoise(np.zeros(shape[0] - 1), np.ones(shape[0] - 1))  # was a broadcast error at learning_starts
+    message = f"DTDPG: action_noise draws noise of shape ({shape[0] - 1},), which does not fit the action space's shape"
+    with pytest.raises(ValueError, match=re.escape(message)):
+        DTDPG("MlpPolicy", env, action_noise=wrong, **TINY)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        DTDPG("MlpPolicy", env, action_noise=VectorizedActionNoise(wrong, 2), **TINY)
+    for fitting in (OrnsteinUhlenbeckActionNoise(np.zeros(shape), np.ones(shape)), NormalActionNoise(np.zeros(1), np.ones(1))):
+        model = DTDPG("MlpPolicy", env, action_noise=fitting, **TINY)
+        model.learn(12)  # past learning_starts: the noise is added to the policy's actions
+        assert model.num_timesteps == 12

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "check_action_noise",
     "check_callback",
     "check_folder",
     "check_log_interval",
@@ -122,6 +123,41 @@ def check_switches(owner: str, switches: Mapping[str, Any]) -> None:
     for name, value in switches.items():
         if not isinstance(value, (bool, np.bool_)):
             raise ValueError(f"{owner}: {name} must be True or False, got {value!r}")
+
+
+def _noise_shape(noise: Any) -> tuple[int, ...] | None:
+    """:return: the shape of the draws of SB3's noises (and of noises built like them: a mean ``_mu`` or ``mean``),
+    of one env's copy for a vectorized noise; None where the noise does not show it"""
+    noises = getattr(noise, "noises", None)
+    if isinstance(noises, list) and noises:  # VectorizedActionNoise: one copy per env
+        noise = noises[0]
+    for name in ("_mu", "mean"):
+        mean = getattr(noise, name, None)
+        if isinstance(mean, np.ndarray):
+            return mean.shape
+    return None
+
+
+def check_action_noise(owner: str, noise: Any, action_shape: tuple[int, ...]) -> None:
+    """
+    :param owner: what the noise is for, at the start of the message
+    :param noise: the action noise (None: no noise)
+    :param action_shape: the shape of one action
+    :raises ValueError: the noise's draws do not broadcast to one action (SB3 would fail at the first noisy step, or
+        widen the action), naming both shapes
+    """
+    shape = _noise_shape(noise) if noise is not None else None
+    if shape is None:
+        return
+    try:
+        fits = np.broadcast_shapes((1, *action_shape), shape) == (1, *action_shape)
+    except ValueError:
+        fits = False
+    if not fits:
+        raise ValueError(
+            f"{owner}: action_noise draws noise of shape {shape}, which does not fit the action space's shape "
+            f"{tuple(action_shape)}: build it with mean and sigma of that shape, e.g. np.zeros({tuple(action_shape)})"
+        )
 
 
 def check_confidence(confidence: Any) -> None:

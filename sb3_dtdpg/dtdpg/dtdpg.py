@@ -17,6 +17,7 @@ from sb3_dtdpg import env_settings
 from sb3_dtdpg.common.buffers import FastNStepReplayBuffer, reward_components_buffer
 from sb3_dtdpg.common.callbacks import CurriculumTransferCallback
 from sb3_dtdpg.common.checks import (
+    check_action_noise,
     check_callback,
     check_folder,
     check_log_interval,
@@ -200,6 +201,7 @@ class DTDPG(LeanStep, DDPG):
 
         if self.env is not None:  # refused here, not at the first learn()
             check_env_phases(self.phases, self.env)
+            check_action_noise("DTDPG", action_noise, self.action_space.shape)
         schedule = self.phases[0].noise_schedule()
         # No env when load() builds the model: the saved action noise is restored afterwards
         if self.action_noise is None and schedule is not None and self.env is not None:

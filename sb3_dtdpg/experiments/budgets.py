@@ -68,11 +68,11 @@ class Budget:
 #: ``tiny`` runs the whole pipeline on the ``small`` scenario in minutes (too short to learn: a check that it runs; its
 #: paper-task runs train 3 episodes, since those last up to 1000 steps);
 #: ``smoke`` is the shortest budget that shows learning: 150 episodes on ``small``, where DT-DPG brings both robots
-#: home on the test missions (measured, docs/BENCHMARKS.md); ``default`` fits ``compare`` in <= 15 minutes on a
-#: 2-core machine (docs/RESULTS.md); ``mall-200`` and ``small-200`` are the paper's experiments with 200/280
-#: episodes instead of 500/700 on ``mall`` and on ``small`` (``small-200``: what a 2-core machine runs in about an
-#: hour, docs/RESULTS.md); ``paper`` is the paper's scale; ``paper-x4`` four times its training episodes (where the
-#: learners begin to use the radio map, docs/RESULTS.md). ``_micro`` is for the tests.
+#: home on the test missions (measured, docs/BENCHMARKS.md); ``default`` is the main job's (``compare``: 2 min 28 s
+#: on a 2-vCPU VM, docs/BENCHMARKS.md); ``mall-200`` and ``small-200`` are the paper's experiments with 200/280
+#: episodes instead of 500/700 on ``mall`` and on ``small``, 3 seeds; ``paper`` is the paper's scale; ``paper-x4``
+#: four times its training episodes (where the learners begin to use the radio map, docs/RESULTS.md). ``_micro`` is
+#: for the tests.
 BUDGETS: dict[str, Budget] = {
     "_micro": Budget("_micro", episodes=3, long_episodes=4, eval_episodes=2, seeds=2, scenario="small"),
     "tiny": Budget("tiny", episodes=36, long_episodes=50, eval_episodes=5, seeds=2, scenario="small", paper_task_episodes=3),
