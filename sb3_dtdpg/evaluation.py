@@ -9,8 +9,9 @@ evaluated with the same seed, so two policies are compared on paired episodes.
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -138,6 +139,29 @@ class EvaluationResult:
         return out
 
 
+@contextlib.contextmanager
+def _closing(env: gym.Env, on_error_only: bool = False) -> Iterator[None]:
+    """Close an env built here when the block raises (and after it, unless ``on_error_only``)."""
+    try:
+        yield
+    except BaseException:
+        env.close()
+        raise
+    if not on_error_only:
+        env.close()
+
+
+def _check_mission_env(env: gym.Env, name: str) -> None:
+    """:raises ValueError: ``env`` is not a mission env of ``noma_radiomap`` (the missions measured here), naming it"""
+    from noma_radiomap import NomaRadioMapEnv
+
+    if not isinstance(env.unwrapped, NomaRadioMapEnv):
+        raise ValueError(
+            f"evaluate measures the missions of noma_radiomap's envs (e.g. NomaRadioMap-v0); {name} is a "
+            f"{type(env.unwrapped).__name__}: use SB3's evaluate_policy for other envs"
+        )
+
+
 def _make_env(
     env_id_or_env: str | gym.Env,
     channel: str | None,
@@ -153,9 +177,19 @@ def _make_env(
             if wanted is not None:
                 kwargs[name] = wanted
         kwargs.setdefault("channel", "rayleigh")  # the test missions' channel, unless given either way
-        return gym.make(env_id_or_env, **kwargs), True
+        try:
+            env = gym.make(env_id_or_env, **kwargs)
+        except TypeError:  # e.g. "unexpected keyword argument 'channel'": another kind of env, or a misspelt kwarg
+            env = gym.make(env_id_or_env)
+            with _closing(env):
+                _check_mission_env(env, env_id_or_env)
+            raise
+        with _closing(env, on_error_only=True):
+            _check_mission_env(env, env_id_or_env)
+        return env, True
     if not isinstance(env_id_or_env, gym.Env):
         raise ValueError(f"env_id_or_env must be an env id or a gymnasium.Env, got {type(env_id_or_env).__name__}")
+    _check_mission_env(env_id_or_env, "the given env")
     if env_kwargs:
         raise ValueError(f"env_kwargs can only be used with an env id, got an env instance and env_kwargs={env_kwargs!r}")
     base = env_id_or_env.unwrapped

@@ -181,6 +181,8 @@ def preset(name: str, destination_episodes: int | None = None) -> dict[str, Any]
     :param destination_episodes: the episode budget of the destination phase (None: the set's own)
     :return: the ``DTDPG`` keyword arguments, the mission's curriculum (``phases``) included
     """
+    if name not in PRESETS:  # check_preset's message names the CLI's and RunSpec's field, hyperparams
+        raise ValueError(f"preset: name must be one of {PRESETS}, got {name!r}")
     return model_kwargs("dtdpg", name, destination_episodes=destination_episodes)
 
 

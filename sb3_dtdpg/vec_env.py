@@ -62,7 +62,9 @@ class MissionVecEnv(VecEnv):
         """
         if seed is None:
             seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
-        self._next_seeds = [seed + i for i in range(self.num_envs)]
+        elif isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:  # failed at the next reset
+            raise ValueError(f"seed must be an integer >= 0 or None, got {seed!r}")
+        self._next_seeds = [int(seed) + i for i in range(self.num_envs)]
         return list(self._next_seeds)
 
     def set_options(self, options: list[dict] | dict | None = None) -> None:

@@ -121,6 +121,18 @@ def test_a_time_limit_of_make_shortens_missions_and_never_lengthens_them():
         assert truncated and steps == expected
 
 
+def test_the_env_built_without_make_ends_its_missions_at_max_steps_too():
+    # It ran on past max_steps (an endless mission in training, evaluate() never returned) with T_u = max_steps
+    env, made = small_env(), gym.make("NomaRadioMap-v0", scenario="small")
+    for e in (env, made):
+        e.reset(seed=0)
+    for step in range(1, env.max_steps + 1):
+        outcome, made_outcome = env.step(np.zeros(6)), made.step(np.zeros(6))
+        assert outcome[3] == made_outcome[3] == (step == env.max_steps)  # truncated at the same step as under make
+        np.testing.assert_array_equal(outcome[0], made_outcome[0])
+    assert env.step_count == env.max_steps and list(outcome[4]["mission_time"]) == [env.max_steps] * env.n_robots
+
+
 @pytest.mark.parametrize(
     "kwarg,value",
     [("multiple_access", "fdma"), ("channel", "ricean"), ("reward_phase", "speed"), ("inducing", "manhattan")],

@@ -167,6 +167,12 @@ def test_bad_arguments_raise_clear_errors():
         evaluate(object(), env, n_episodes=1)
     with pytest.raises(ValueError, match="options"):
         evaluate(StandStill(), env, n_episodes=2, options=[MISSION])
+    # Another kind of env: was "unexpected keyword argument 'channel'" (an id) or "no attribute 'positions'" (an env)
+    for other in ("Pendulum-v1", gym.make("Pendulum-v1")):
+        with pytest.raises(ValueError, match=r"evaluate measures the missions of noma_radiomap's envs.* a PendulumEnv"):
+            evaluate(StandStill(), other, n_episodes=1)
+    with pytest.raises(TypeError, match="chanel"):  # a misspelt keyword of a mission env keeps gymnasium's message
+        evaluate(StandStill(), "NomaRadioMap-v0", n_episodes=1, env_kwargs={"scenario": "small", "chanel": "rayleigh"})
 
 
 def test_a_model_is_only_tested_on_an_env_with_its_training_settings(tmp_path):

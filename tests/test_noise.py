@@ -1,5 +1,6 @@
 import copy
 import pickle
+import re
 
 import numpy as np
 import pytest
@@ -210,6 +211,9 @@ def test_sb3s_own_noises_are_left_as_they_are_with_the_noise_to_use(noise_class)
         (dict(decay_episodes=2.5), "decay_episodes must be an integer >= 1, got 2.5"),
         (dict(theta=0.0), "theta must be finite and > 0, got 0.0"),
         (dict(dt=-1.0), "dt must be finite and > 0"),
+        (dict(theta="0.15"), "theta must be finite and > 0, got '0.15'"),  # was numpy's "ufunc 'isfinite' not supported"
+        (dict(mean=np.full(2, np.nan)), "mean must be an array of finite numbers"),  # was blamed on the action
+        (dict(initial_noise=np.zeros(3)), "initial_noise must be None or finite numbers of the mean's shape"),
     ],
 )
 def test_bad_arguments(kwargs, match):
@@ -279,3 +283,21 @@ def test_a_noise_pickled_in_the_former_layout_loads_and_goes_on():
     np.testing.assert_array_equal(restored(), expected)
     restored.reset()
     assert restored.episode == 2
+
+
+@pytest.mark.parametrize("noise_class", [NormalNoise, OrnsteinUhlenbeckNoise])
+@pytest.mark.parametrize(
+    "mean, sigma, match",
+    [
+        (np.zeros(2), np.ones(3), "sigma must be a number or an array broadcastable to the action shape (2,)"),
+        (np.zeros(2), np.ones((2, 1)), "sigma must be a number or an array broadcastable"),  # widened the action
+        (np.zeros(2), -0.1 * np.ones(2), "sigma must be finite and >= 0"),  # numpy's "scale < 0" at the first draw
+        (np.zeros(2), np.full(2, np.nan), "sigma must be finite and >= 0"),
+        (np.array([0.0, np.inf]), np.ones(2), "mean must be an array of finite numbers"),
+    ],
+)
+def test_the_constant_noises_refuse_settings_they_cannot_draw_with(noise_class, mean, sigma, match):
+    with pytest.raises(ValueError, match=re.escape(match)):
+        noise_class(mean, sigma)
+    noise = noise_class(np.zeros(2), 0.3 * np.ones(2))  # fitting settings: the draws of SB3's noise of that kind
+    assert noise().shape == (2,)

@@ -172,7 +172,12 @@ def test_eval_mode_predict_is_deterministic_and_batch_independent():
 
 
 @pytest.mark.parametrize(
-    "kwargs, match", [(dict(batch_norm_momentum=0.0), "batch_norm_momentum"), (dict(batch_norm_eps=0), "eps")]
+    "kwargs, match",
+    [
+        (dict(batch_norm_momentum=0.0), "batch_norm_momentum"),
+        (dict(batch_norm_eps=0), "eps"),
+        (dict(batch_norm_eps=float("inf")), "batch_norm_eps must be a finite number > 0, got inf"),  # constant actions
+    ],
 )
 def test_bad_batch_norm_arguments(kwargs, match):
     env = gym.make("Pendulum-v1")

@@ -155,8 +155,10 @@ def test_the_readme_line_is_the_tuned_make_model():
 
 
 def test_unknown_sets_are_refused():
+    with pytest.raises(ValueError, match=r"preset: name must be one of \('paper', 'tuned'\), got 'Tuned'"):
+        presets.preset("Tuned")  # named the CLI's option, hyperparams, which preset() does not have
     with pytest.raises(ValueError, match="hyperparams must be one of"):
-        presets.preset("fast")
+        presets.settings("dtdpg", "fast")
     with pytest.raises(ValueError, match="'tuned' is defined for 'dtdpg' and 'ddpg' only, got algo='sac'"):
         presets.settings("sac", "tuned")
     with pytest.raises(ValueError, match="destination_episodes applies to 'dtdpg' only"):

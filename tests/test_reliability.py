@@ -469,12 +469,23 @@ def test_curriculum_checkpoints_leave_no_temp_files_and_clean_old_ones(tmp_path)
 
     from sb3_dtdpg import DTDPG
 
-    stale = tmp_path / ".phase_0_destination.zip.killed.tmp"
+    stale = tmp_path / ".phase_0_train.zip.killed.tmp"  # the one phase of the default curriculum on small
     stale.write_bytes(b"")  # a save killed by SIGKILL
+    others = [tmp_path / ".results.csv.tmp", tmp_path / ".results.csv.x1.tmp"]  # another program's, in the user's folder
+    for other in others:
+        other.write_bytes(b"kept")
     env = gym.make("NomaRadioMap-v0", scenario="small")
     model = DTDPG("MlpPolicy", env, learning_starts=10, curriculum_save_path=str(tmp_path), policy_kwargs={"net_arch": [8]})
     model.learn(1)
     assert not stale.exists()
+    assert all(other.read_bytes() == b"kept" for other in others)  # were deleted as leftovers of the curriculum
+
+
+def test_remove_temp_files_of_named_files_only(tmp_path):
+    for name in (".model.zip.x1.tmp", ".other.zip.x2.tmp", ".model.zip2.x3.tmp"):
+        (tmp_path / name).write_bytes(b"")
+    assert [p.name for p in remove_temp_files(tmp_path, ["model.zip"])] == [".model.zip.x1.tmp"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".model.zip2.x3.tmp", ".other.zip.x2.tmp"]
 
 
 def test_the_env_works_without_a_writable_numba_cache():

@@ -273,3 +273,22 @@ def test_destinations_reachable_by_straight_motion(name):
                     if arrived[0]:
                         break
                 assert arrived[0], f"{name}: robot {u} from {start} stops at {position[0]}, short of {destination}"
+
+
+def test_a_scenario_changed_in_code_is_validated_by_the_env():
+    import dataclasses
+
+    import gymnasium as gym
+
+    import noma_radiomap  # noqa: F401  (registers the envs)
+
+    small = load_scenario("small")
+    rewarded_outage = dataclasses.replace(small, mission=dataclasses.replace(small.mission, outage_penalty=-5.0))
+    with pytest.raises(ValueError, match=r"mission\.outage_penalty: .*>= 0"):  # was a +5 reward for every outage step
+        gym.make("NomaRadioMap-v0", scenario=rewarded_outage)
+    no_power = dataclasses.replace(small, ap=dataclasses.replace(small.ap, max_power_dbm=float("nan")))
+    with pytest.raises(ValueError, match=r"ap\.max_power_dbm"):  # was NaN powers and MQI under a finite reward
+        gym.make("NomaRadioMap-v0", scenario=no_power)
+    louder = dataclasses.replace(small, ap=dataclasses.replace(small.ap, max_power_dbm=small.ap.max_power_dbm + 3))
+    env = gym.make("NomaRadioMap-v0", scenario=louder)  # a valid change is taken as given
+    assert env.unwrapped.scenario is louder

@@ -167,3 +167,38 @@ def test_an_action_noise_of_another_shape_is_refused_at_construction():
         model = DTDPG("MlpPolicy", env, action_noise=fitting, **TINY)
         model.learn(12)  # past learning_starts: the noise is added to the policy's actions
         assert model.num_timesteps == 12
+
+
+def test_an_action_noise_whose_mean_and_sigma_disagree_is_refused_at_construction():
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    env = make_env("dtdpg", env_kwargs={"scenario": "small"})
+    n = env.action_space.shape[0]
+    with pytest.raises(ValueError, match=re.escape(f"mean of shape ({n},) and a sigma of shape ({n - 1},)")):
+        DTDPG("MlpPolicy", env, action_noise=NormalActionNoise(np.zeros(n), np.ones(n - 1)), **TINY)
+
+
+def test_load_checks_the_action_noise_it_is_given(tmp_path):
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    env = make_env("dtdpg", env_kwargs={"scenario": "small"})
+    n = env.action_space.shape[0]
+    DTDPG("MlpPolicy", env, **TINY).save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=re.escape(f"DTDPG.load: action_noise draws noise of shape ({n - 1},)")):
+        DTDPG.load(tmp_path / "model.zip", env=env, action_noise=NormalActionNoise(np.zeros(n - 1), np.ones(n - 1)))
+    fitting = NormalActionNoise(np.zeros(n), np.ones(n))
+    assert DTDPG.load(tmp_path / "model.zip", env=env, action_noise=fitting).action_noise is fitting
+
+
+@pytest.mark.parametrize(
+    "buffer_kwargs, message",
+    [
+        (dict(n_steps=3), "replay_buffer_kwargs['n_steps'] = 3 differs from the model's n_steps = 1"),  # was one-step
+        (dict(n_steps=1, gamma=0.5), "replay_buffer_kwargs['gamma'] = 0.5 differs from the model's gamma = 0.99"),
+    ],
+)
+def test_returns_given_in_replay_buffer_kwargs_that_the_model_would_replace_are_refused(buffer_kwargs, message):
+    with pytest.raises(ValueError, match=re.escape(f"DTDPG: {message}")):
+        DTDPG("MlpPolicy", "Pendulum-v1", replay_buffer_kwargs=buffer_kwargs, **TINY)
+    model = DTDPG("MlpPolicy", "Pendulum-v1", n_steps=3, replay_buffer_kwargs=dict(n_steps=3, gamma=0.99), **TINY)
+    assert (model.replay_buffer.n_steps, model.replay_buffer.gamma) == (3, 0.99)  # the same values: taken as given

@@ -540,3 +540,13 @@ def test_a_study_worker_meeting_another_runs_result_says_so_in_one_line(monkeypa
         distributed.main(["compare", "--budget", "tiny", "--out", "out", "--storage", "s.log", "--study-name", "job"])
     errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
     assert exit_info.value.code == 2 and len(errors) == 1 and "belongs to another run with the same id" in errors[0]
+
+
+@pytest.mark.parametrize("seed", [-3, 1.5, True, "0"])
+def test_a_seed_no_mission_can_have_is_refused_when_given(seed):
+    env = make_mission_vec_env(n_envs=2, env_kwargs={"scenario": "small"})
+    with pytest.raises(ValueError, match=re.escape(f"seed must be an integer >= 0 or None, got {seed!r}")):
+        env.seed(seed)  # was Gymnasium's error at the next reset (inside learn()); True was taken as seed 1
+    with pytest.raises(ValueError, match=re.escape(f"got {seed!r}")):
+        make_mission_vec_env(n_envs=2, seed=seed, env_kwargs={"scenario": "small"})
+    assert env.seed(np.int64(4)) == [4, 5]

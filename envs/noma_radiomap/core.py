@@ -170,8 +170,10 @@ def _row_options(options: Any, n_rows: int) -> list[dict | None]:
 
 
 def load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
-    """A scenario from a built-in name, a YAML path or a :class:`Scenario`."""
+    """A scenario from a built-in name, a YAML path or a :class:`Scenario` (validated as a YAML file is)."""
     if isinstance(scenario, Scenario):
+        # One built or changed in code (``dataclasses.replace``) has not been through the checks of ``from_dict``
+        Scenario.from_dict(scenario.to_dict(), scenario.source)
         return scenario
     if isinstance(scenario, str | os.PathLike):
         return load_scenario(scenario)

@@ -95,10 +95,12 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Episode End
 
-    Terminates when every robot has arrived (within ``arrival_radius`` of its destination). Truncation is left
-    to Gymnasium's ``TimeLimit``: the registered ids wrap the env in one of the scenario's ``mission.max_steps``
-    steps (:func:`noma_radiomap.registration.make_env`), so ``spec.max_episode_steps`` follows the scenario;
-    ``gymnasium.make(..., max_episode_steps=n)`` may end it sooner (the last ``info`` has the summary either way).
+    Terminates when every robot has arrived (within ``arrival_radius`` of its destination); truncated at the
+    scenario's ``mission.max_steps``, where a mission ends (``T_u`` of a robot that has not arrived is that number
+    of steps), also when the env is built without ``gymnasium.make``. The registered ids wrap it in a ``TimeLimit``
+    of the same steps (:func:`noma_radiomap.registration.make_env`), so ``spec.max_episode_steps`` follows the
+    scenario; ``gymnasium.make(..., max_episode_steps=n)`` may end it sooner (the last ``info`` has the summary
+    either way).
     Stepping, rendering, ``trajectory`` or :meth:`episode_summary` before the first ``reset`` raise Gymnasium's
     ``ResetNeeded`` ("call reset() first").
 
@@ -248,7 +250,8 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
         info = result.info(0)  # with the episode summary as of this step (core.SUMMARY_KEYS)
         if self.render_mode == "human":
             self.render()
-        return core.observations()[0], float(result.reward[0]), terminated, False, info
+        truncated = bool(result.truncated[0])  # at max_steps: TimeLimit's step too, where the registered ids have one
+        return core.observations()[0], float(result.reward[0]), terminated, truncated, info
 
     def episode_summary(self) -> dict[str, Any]:
         """

@@ -125,7 +125,9 @@ class CurriculumTransferCallback(BaseCallback):
     def _on_training_start(self) -> None:
         self._check_setup()
         if self.save_path is not None:
-            remove_temp_files(self.save_path)  # left by a process killed while saving
+            # left by a process killed while saving this curriculum's checkpoints (the folder may hold other files)
+            names = [os.path.basename(self.checkpoint_path(i)) for i in range(len(self.phases))]  # type: ignore[arg-type]
+            remove_temp_files(self.save_path, names)
         self._pending_replay = None
         self._stop = False
         state = getattr(self.model, "curriculum_state", None)

@@ -125,17 +125,29 @@ def check_switches(owner: str, switches: Mapping[str, Any]) -> None:
             raise ValueError(f"{owner}: {name} must be True or False, got {value!r}")
 
 
-def _noise_shape(noise: Any) -> tuple[int, ...] | None:
-    """:return: the shape of the draws of SB3's noises (and of noises built like them: a mean ``_mu`` or ``mean``),
-    of one env's copy for a vectorized noise; None where the noise does not show it"""
+def _noise_shape(owner: str, noise: Any) -> tuple[int, ...] | None:
+    """:return: the shape of the draws of SB3's noises (and of noises built like them: a mean ``_mu`` or ``mean``
+    and a scale ``_sigma`` or ``sigma``), of one env's copy for a vectorized noise; None where the noise does not
+    show it
+    :raises ValueError: the mean and the scale do not broadcast together"""
     noises = getattr(noise, "noises", None)
     if isinstance(noises, list) and noises:  # VectorizedActionNoise: one copy per env
         noise = noises[0]
-    for name in ("_mu", "mean"):
-        mean = getattr(noise, name, None)
-        if isinstance(mean, np.ndarray):
-            return mean.shape
-    return None
+    shapes = {}
+    for part, names in (("mean", ("_mu", "mean")), ("sigma", ("_sigma", "sigma"))):
+        values = [getattr(noise, name, None) for name in names]
+        arrays = [value for value in values if isinstance(value, np.ndarray)]
+        if arrays:
+            shapes[part] = arrays[0].shape
+    if "mean" not in shapes:
+        return None
+    try:
+        return np.broadcast_shapes(*shapes.values())
+    except ValueError:
+        raise ValueError(
+            f"{owner}: action_noise has a mean of shape {shapes['mean']} and a sigma of shape {shapes['sigma']}, "
+            "which do not broadcast together"
+        ) from None
 
 
 def check_action_noise(owner: str, noise: Any, action_shape: tuple[int, ...]) -> None:
@@ -146,7 +158,7 @@ def check_action_noise(owner: str, noise: Any, action_shape: tuple[int, ...]) ->
     :raises ValueError: the noise's draws do not broadcast to one action (SB3 would fail at the first noisy step, or
         widen the action), naming both shapes
     """
-    shape = _noise_shape(noise) if noise is not None else None
+    shape = _noise_shape(owner, noise) if noise is not None else None
     if shape is None:
         return
     try:

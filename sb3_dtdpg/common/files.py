@@ -6,7 +6,7 @@ import json
 import os
 import re
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -146,19 +146,22 @@ def save_figure(figure: Any, path: str | os.PathLike[str], **kwargs: Any) -> Pat
     return atomic_write(path, lambda tmp: figure.savefig(tmp, format=file_format, **kwargs))
 
 
-def remove_temp_files(folder: str | os.PathLike[str]) -> list[Path]:
+def remove_temp_files(folder: str | os.PathLike[str], names: Iterable[str] | None = None) -> list[Path]:
     """
     Remove the temporary files that :func:`atomic_write` left in a folder (not recursive) when a process was killed.
 
     :param folder: the folder (missing: nothing to do)
+    :param names: only those of writes to these file names (None: any; for a folder that only this program writes,
+        as a user's folder may hold other programs' hidden ``.tmp`` files, or another job's writes in progress)
     :return: the removed files
     """
     folder = Path(folder)
     if not folder.is_dir():
         return []
+    prefixes = (TEMP_PREFIX,) if names is None else tuple(f"{TEMP_PREFIX}{name}." for name in names)
     removed = []
     for entry in folder.iterdir():
-        if entry.name.startswith(TEMP_PREFIX) and entry.name.endswith(_TEMP_SUFFIX) and entry.is_file():
+        if entry.name.startswith(prefixes) and entry.name.endswith(_TEMP_SUFFIX) and entry.is_file():
             entry.unlink(missing_ok=True)
             removed.append(entry)
     return removed

@@ -26,6 +26,36 @@ def _as_sigma(name: str, value: float | np.ndarray, shape: tuple[int, ...]) -> n
     return array
 
 
+def _check_process(mean: Any, sigma: Any, theta: Any = 0.15, dt: Any = 1e-2, initial_noise: Any = None) -> np.ndarray:
+    """
+    Check the settings of a Gaussian or OU noise before SB3's constructor takes them (it checks none: a wrong one
+    failed, or went wrong, at the first draw, during training).
+
+    :return: the mean as an array
+    :raises ValueError: naming the first setting that is not finite, positive or of the mean's shape
+    """
+    try:
+        array = np.asarray(mean, dtype=np.float64)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or not np.all(np.isfinite(array)):
+        raise ValueError(f"mean must be an array of finite numbers (its shape is the action shape), got {mean!r}")
+    _as_sigma("sigma", sigma, array.shape)
+    for name, value in (("theta", theta), ("dt", dt)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value) or value <= 0:
+            raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+    if initial_noise is not None:
+        try:
+            noise = np.broadcast_to(np.asarray(initial_noise, dtype=np.float64), array.shape)
+        except (TypeError, ValueError):
+            noise = None
+        if noise is None or not np.all(np.isfinite(noise)):
+            raise ValueError(
+                f"initial_noise must be None or finite numbers of the mean's shape {array.shape}, got {initial_noise!r}"
+            )
+    return np.asarray(mean)
+
+
 def _as_decay_episodes(value: Any) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValueError(f"decay_episodes must be an integer >= 1, got {value!r}")
@@ -103,10 +133,8 @@ class LinearDecayOUNoise(ActionNoise):
         initial_noise: np.ndarray | None = None,
         dtype: DTypeLike = np.float32,
     ) -> None:
-        mean = np.asarray(mean)
-        for name, value in (("theta", theta), ("dt", dt)):
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        mean = _check_process(mean, sigma, theta, dt, initial_noise)
+        _as_sigma("final_sigma", final_sigma, mean.shape)
         super().__init__()
         self._schedule = _EpisodeSchedule(
             _as_sigma("sigma", sigma, mean.shape),
@@ -245,6 +273,7 @@ class NormalNoise(NormalActionNoise):
     """
 
     def __init__(self, mean: np.ndarray, sigma: np.ndarray, dtype: DTypeLike = np.float32) -> None:
+        _check_process(mean, sigma)
         self.mean, self.sigma, self.dtype = mean, sigma, dtype
         super().__init__(mean, sigma, dtype)
 
@@ -281,6 +310,7 @@ class OrnsteinUhlenbeckNoise(OrnsteinUhlenbeckActionNoise):
         initial_noise: np.ndarray | None = None,
         dtype: DTypeLike = np.float32,
     ) -> None:
+        _check_process(mean, sigma, theta, dt, initial_noise)
         self.mean, self.sigma, self.theta, self.dt, self.dtype = mean, sigma, theta, dt, dtype
         super().__init__(mean, sigma, theta, dt, initial_noise, dtype)
 

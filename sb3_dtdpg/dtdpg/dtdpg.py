@@ -210,6 +210,14 @@ class DTDPG(LeanStep, DDPG):
         # other n_steps or gamma (as SB3's own pick follows the model's n_steps and gamma)
         self._buffer_follows_returns = self.replay_buffer_class is None
         if self._buffer_follows_returns:
+            returns = {"n_steps": self.n_steps, "gamma": self.gamma}
+            for name, value in returns.items():  # the pick below sets them from the model's: a different one is lost
+                if name in self.replay_buffer_kwargs and self.replay_buffer_kwargs[name] != value:
+                    raise ValueError(
+                        f"DTDPG: replay_buffer_kwargs[{name!r}] = {self.replay_buffer_kwargs[name]!r} differs from the "
+                        f"model's {name} = {value!r}: the replay buffer's returns follow the constructor's n_steps and "
+                        f"gamma, pass {name}={self.replay_buffer_kwargs[name]!r} to DTDPG instead"
+                    )
             self._pick_replay_buffer()
 
         if _init_setup_model:
@@ -396,6 +404,8 @@ class DTDPG(LeanStep, DDPG):
         data = load_from_zip_file(path, device="cpu", custom_objects=custom_objects, load_data=True)[0] or {}
         if env is not None:
             env_settings.check_settings(data.get("env_settings"), env, f"the model {path}")
+        if kwargs.get("action_noise") is not None and data.get("action_space") is not None:
+            check_action_noise("DTDPG.load", kwargs["action_noise"], data["action_space"].shape)
         # a model saved before its buffer choice was recorded keeps its buffer (the constructor's flag would stand)
         kwargs.setdefault("_buffer_follows_returns", data.get("_buffer_follows_returns", False))
         saved = data.get("replay_buffer_kwargs") or {}

@@ -1,5 +1,6 @@
 """Batch-normalised actor and critic of DT-DPG (Section IV-C of the paper)."""
 
+import math
 from typing import Any
 
 import torch as th
@@ -280,8 +281,8 @@ class DTDPGPolicy(TD3Policy):
         self.critic_norm = critic_norm
         if not 0.0 < batch_norm_momentum <= 1.0:
             raise ValueError(f"batch_norm_momentum must be in (0, 1], got {batch_norm_momentum!r}")
-        if not batch_norm_eps > 0.0:
-            raise ValueError(f"batch_norm_eps must be > 0, got {batch_norm_eps!r}")
+        if not 0.0 < batch_norm_eps < math.inf:  # an infinite eps normalises everything to 0: constant actions
+            raise ValueError(f"batch_norm_eps must be a finite number > 0, got {batch_norm_eps!r}")
         self.batch_norm_momentum = batch_norm_momentum
         self.batch_norm_eps = batch_norm_eps
         if optimizer_kwargs is None and optimizer_class in (th.optim.Adam, th.optim.AdamW):
