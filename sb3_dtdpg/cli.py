@@ -243,7 +243,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
     """``train`` on a NomaRadioMap env: a run of :func:`sb3_dtdpg.experiments.runs.run_one`, checkpointed."""
     from sb3_dtdpg.evaluation import format_ci
     from sb3_dtdpg.experiments.runs import DamagedRecordError, RunSpec, output_lock, read_checkpoint, run_one
-    from sb3_dtdpg.experiments.storage import run_lock_name
+    from sb3_dtdpg.experiments.storage import TRAINED_RECORD, run_lock_name
 
     spec = RunSpec(
         args.algo,
@@ -283,6 +283,10 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
             checkpoint = read_checkpoint(run_dir)
         except DamagedRecordError as error:  # changed from outside while the run trained
             print(f"interrupted: {error}", file=sys.stderr)
+            return 130
+        if (run_dir / TRAINED_RECORD).is_file() and (run_dir / "model.zip").is_file():
+            saved = f"training had finished and the model is in {run_dir / 'model.zip'}"
+            print(f"interrupted in the test episodes: {saved}; run the same command again to test it", file=sys.stderr)
             return 130
         if checkpoint is None:
             saved = f"nothing saved yet (the first checkpoint comes after {args.checkpoint_every} episodes)"

@@ -421,6 +421,44 @@ def test_a_full_disk_at_the_result_leaves_no_partial_file_and_a_rerun_finishes(t
         pass
 
 
+def test_a_run_interrupted_in_its_evaluations_is_evaluated_again_not_trained_again(tmp_path, monkeypatch):
+    from sb3_dtdpg.experiments import runs
+
+    evaluations = runs._evaluations
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runs, "_evaluations", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_one(SPEC, tmp_path / "a", resume=True)
+    model = tmp_path / "a" / "runs" / SPEC.run_id / "model.zip"
+    trained_bytes = model.read_bytes()
+    monkeypatch.setattr(runs, "_evaluations", evaluations)
+    monkeypatch.setattr(runs, "_train", lambda *args, **kwargs: pytest.fail("trained again"))  # was: all of it again
+    resumed = run_one(SPEC, tmp_path / "a", resume=True)
+    monkeypatch.undo()
+    assert model.read_bytes() == trained_bytes and not (model.parent / "trained.json").exists()
+    uninterrupted = run_one(SPEC, tmp_path / "b", resume=True)
+    assert resumed["eval"] == uninterrupted["eval"]  # the model as loaded tests as the model in memory did
+    assert {k: v for k, v in resumed["train"].items() if k not in ("wall_s", "steps_per_s")} == {
+        k: v for k, v in uninterrupted["train"].items() if k not in ("wall_s", "steps_per_s")
+    }
+
+
+def test_train_interrupted_in_its_test_episodes_says_the_model_is_saved(tmp_path, monkeypatch, capsys):
+    from sb3_dtdpg.experiments import runs
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runs, "_evaluations", interrupted)
+    assert main([*TRAIN, "--out", str(tmp_path)]) == 130
+    message = capsys.readouterr().err  # was "nothing saved yet (the first checkpoint comes after 10 episodes)"
+    assert "interrupted in the test episodes: training had finished and the model is in" in message
+    assert "run the same command again to test it" in message
+
+
 # ---------------------------------------------------------------------------------------------- paths and HOME
 def test_paths_with_spaces_and_symlinks(tmp_path):
     real = tmp_path / "real folder"

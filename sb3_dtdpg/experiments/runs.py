@@ -51,6 +51,7 @@ from sb3_dtdpg.experiments.specs import (
     run_identity,
 )
 from sb3_dtdpg.experiments.storage import (
+    TRAINED_RECORD,
     DamagedRecordError,
     OutputBusyError,
     clear_checkpoints,
@@ -60,6 +61,7 @@ from sb3_dtdpg.experiments.storage import (
     progress_path,
     read_checkpoint,
     read_progress,
+    read_trained,
     result_path,
     run_folder,
     run_logger,
@@ -369,6 +371,9 @@ def run_one(
         finished = load_result(out, spec, identity)
         if finished is not None:
             return finished
+        trained = read_trained(run_dir, identity)
+        if trained is not None:  # interrupted in its evaluations: the trained model is evaluated, not trained again
+            return _record_result(spec, out, _load_trained(spec, run_dir, verbose), trained, n_trajectories)
         checkpoint = read_checkpoint(run_dir, identity)
     tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
     with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):
@@ -414,11 +419,8 @@ def _train_and_record(
         trained_on = [env.unwrapped.reward_phase]
     final_reward_phase = env.unwrapped.reward_phase
     env.close()
-    result: dict[str, Any] = {
+    trained = {
         "identity": identity,
-        "spec": dataclasses.asdict(spec),
-        "run_id": spec.run_id,
-        "group": spec.group,
         "train": {
             "timesteps": int(model.num_timesteps),
             "episodes": int(counter.n_episodes),
@@ -428,11 +430,44 @@ def _train_and_record(
             "steps_per_s": (model.num_timesteps - start_timesteps) / max(train_s, 1e-9),
         },
         "reward_phases": {"trained": trained_on, "evaluated": final_reward_phase},
-        **_evaluations(spec, model, run_dir, trained_on, final_reward_phase, n_trajectories),
         "curriculum_state": curriculum,
     }
+    # What the result keeps of the training, so that a run interrupted in its evaluations resumes with them
+    write_json(run_dir / TRAINED_RECORD, trained, indent=1)
+    return _record_result(spec, out, model, trained, n_trajectories)
+
+
+def _load_trained(spec: RunSpec, run_dir: Path, verbose: int) -> Any:
+    """:return: the run's trained model (``model.zip``, beside its :data:`TRAINED_RECORD`)
+    :raises DamagedRecordError: it cannot be loaded"""
+    from sb3_dtdpg.baselines import load_model
+
+    path = run_dir / "model.zip"
+    try:
+        return load_model(spec.algo, path, device="cpu", verbose=verbose)
+    except Exception as error:  # written atomically: damaged from outside
+        raise DamagedRecordError(
+            f"the trained model {path} cannot be loaded ({type(error).__name__}: {str(error)[:200]}); delete "
+            f"{run_dir / TRAINED_RECORD} to train the run again"
+        ) from error
+
+
+def _record_result(spec: RunSpec, out: Path, model: Any, trained: dict[str, Any], n_trajectories: int) -> dict[str, Any]:
+    """Evaluate the trained model and write the run's result (:func:`result_path`); :return: the result"""
+    run_dir = run_folder(out, spec)
+    reward_phases = trained["reward_phases"]
+    result: dict[str, Any] = {
+        "identity": trained["identity"],
+        "spec": dataclasses.asdict(spec),
+        "run_id": spec.run_id,
+        "group": spec.group,
+        "train": trained["train"],
+        "reward_phases": reward_phases,
+        **_evaluations(spec, model, run_dir, reward_phases["trained"], reward_phases["evaluated"], n_trajectories),
+        "curriculum_state": trained["curriculum_state"],
+    }
     write_json(result_path(out, spec), result, indent=1)
-    clear_checkpoints(run_dir)  # the result supersedes them
+    clear_checkpoints(run_dir)  # the result supersedes them (and the record of the training)
     return result
 
 

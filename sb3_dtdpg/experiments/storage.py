@@ -429,6 +429,29 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
     return checkpoint
 
 
+#: A run's record of its finished training, written after its ``model.zip`` and before its evaluations
+TRAINED_RECORD = "trained.json"
+
+
+def read_trained(run_dir: str | Path, identity: dict[str, Any]) -> dict[str, Any] | None:
+    """
+    The record of a run that finished training and was interrupted before its result was written (in its
+    evaluations): what the result keeps of the training, so that the run is evaluated without training again.
+
+    :param run_dir: the run's folder
+    :param identity: the run's :func:`run_identity`
+    :return: the record, or None when there is none (or no ``model.zip`` beside it: removed from outside)
+    :raises RunMismatchError: the record is another run's
+    :raises DamagedRecordError: the record cannot be read
+    """
+    path = Path(run_dir) / TRAINED_RECORD
+    if not path.exists() or not (path.parent / "model.zip").is_file():
+        return None
+    record = _read_record(path)
+    check_identity(record, identity, path)
+    return record
+
+
 def failure_path(out: str | Path, spec: RunSpec) -> Path:
     """:return: the record of a failed run (:func:`sb3_dtdpg.experiments.runs.run_one` writes it when training diverges)"""
     return run_folder(out, spec) / "failed.json"
@@ -441,4 +464,5 @@ def clear_checkpoints(run_dir: Path) -> None:
     """
     (run_dir / "checkpoint.json").unlink(missing_ok=True)
     (run_dir / "progress.json").unlink(missing_ok=True)
+    (run_dir / TRAINED_RECORD).unlink(missing_ok=True)
     shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)
