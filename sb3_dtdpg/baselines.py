@@ -33,7 +33,7 @@ from stable_baselines3.common.monitor import Monitor
 
 import noma_radiomap  # noqa: F401  (registers the env ids)
 from sb3_dtdpg import presets
-from sb3_dtdpg.common.checks import check_off_policy_settings
+from sb3_dtdpg.common.checks import check_action_noise, check_off_policy_settings
 from sb3_dtdpg.dtdpg.dtdpg import DTDPG
 
 __all__ = [
@@ -286,6 +286,7 @@ def make_model(
         options["learning_rate"] = learning_rate
     options.update(kwargs)
     check_off_policy_settings(algo, options)
+    check_action_noise(algo, options.get("action_noise"), env.action_space.shape)
     return _CLASSES[algo]("MlpPolicy", env, seed=seed, tensorboard_log=tensorboard_log, verbose=verbose, **options)
 
 

@@ -184,8 +184,13 @@ def _train_env(args: argparse.Namespace) -> tuple[Any, bool]:
     if mission:
         args.observation = args.observation or default_observation_of(args.env)
         env_kwargs["observation"] = args.observation
+    import gymnasium as gym
+
     with _user_errors(args):
-        env = make_env(args.algo, args.env, args.multiple_access, args.channel, env_kwargs)
+        try:
+            env = make_env(args.algo, args.env, args.multiple_access, args.channel, env_kwargs)
+        except gym.error.Error as error:  # e.g. DependencyNotInstalled: a registered id whose package is missing
+            args.error(f"--env {args.env} cannot be made here: {type(error).__name__}: {error}")
     return env, mission
 
 
@@ -211,15 +216,21 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.threads:
         th.set_num_threads(args.threads)
     env, mission = _train_env(args)
+    given = ",".join(f"{name}:{value!r}" for name, value in args.overrides.items())  # SB3 adds to policy_kwargs
     with _user_errors(args):  # what the constructor refuses, before anything is written
-        make_model(
-            args.algo,
-            env,
-            learning_rate=args.learning_rate,
-            hyperparams=args.hyperparams,
-            _init_setup_model=False,
-            **args.overrides,
-        )
+        try:
+            make_model(
+                args.algo,
+                env,
+                learning_rate=args.learning_rate,
+                hyperparams=args.hyperparams,
+                _init_setup_model=bool(args.overrides),  # the networks and buffer with what the user gave
+                **args.overrides,
+            )
+        except TypeError as error:
+            if not args.overrides:
+                raise
+            args.error(f"--hyperparams {given}: the model cannot be built with these ({error})")
     max_steps = int(env.unwrapped.scenario.mission.max_steps) if mission else env.spec.max_episode_steps
     if args.timesteps is None and max_steps is None:
         args.error(f"--episodes: {args.env} has no episode step limit to turn episodes into steps; give --timesteps")

@@ -108,6 +108,33 @@ def _check_net_arch(net_arch: Any, where: str) -> None:
             )
 
 
+#: Policy arguments that take a class (a string names none: the CLI's --hyperparams reads Python literals only)
+_CLASS_ARGUMENTS = ("activation_fn", "optimizer_class", "features_extractor_class")
+
+
+def _check_policy_kwargs(algo_class: type, policy_kwargs: Mapping[str, Any], where: str) -> None:
+    """:raises HyperparameterError: a name the algorithm's ``MlpPolicy`` does not take (with the closest ones), or a
+    string where it takes a class"""
+    policy_class = getattr(algo_class, "policy_aliases", {}).get("MlpPolicy")
+    if policy_class is not None:
+        parameters = inspect.signature(policy_class).parameters
+        if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+            known = [name for name in parameters if name not in ("observation_space", "action_space", "lr_schedule")]
+            for name in policy_kwargs:
+                if name not in known:
+                    close = difflib.get_close_matches(name, known, n=3)
+                    hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+                    raise HyperparameterError(f"unknown policy_kwargs key {name!r} for {policy_class.__name__}{where}{hint}")
+    for name in _CLASS_ARGUMENTS:
+        if isinstance(policy_kwargs.get(name), str):
+            literal = "--hyperparams" in where  # the CLI's: Python literals only
+            raise HyperparameterError(
+                f"policy_kwargs[{name!r}]{where} must be a class (e.g. torch.nn.ReLU), got the string "
+                f"{policy_kwargs[name]!r}"
+                + ("; --hyperparams takes Python literals only: give classes in an RL Zoo file" if literal else "")
+            )
+
+
 def check_constructor_kwargs(
     algo_class: type,
     kwargs: dict[str, Any],
@@ -146,6 +173,8 @@ def check_constructor_kwargs(
     policy_kwargs = kwargs.get("policy_kwargs")
     if policy_kwargs is not None and not isinstance(policy_kwargs, Mapping):
         raise HyperparameterError(f"policy_kwargs{where} must be a dict, e.g. dict(net_arch=[64, 64]), got {policy_kwargs!r}")
+    if isinstance(policy_kwargs, Mapping):
+        _check_policy_kwargs(algo_class, policy_kwargs, where)
     if isinstance(policy_kwargs, Mapping) and "net_arch" in policy_kwargs:
         _check_net_arch(policy_kwargs["net_arch"], where)
     if kwargs.get("device") is not None:

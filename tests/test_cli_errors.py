@@ -42,6 +42,12 @@ def assert_one_error_line(code, printed, command, message):
         (["--hyperparams", "policy_kwargs:dict(net_arch=[100000, 100000])"], "more than the 20,000,000 allowed"),
         (["--hyperparams", "batch_size"], "expected key:value"),
         (["--hyperparams", "gamma:__import__('os')"], "is not a Python literal"),
+        # were tracebacks after --out was made (the check built the model without its networks and buffer)
+        (["--hyperparams", "policy_kwargs:dict(net_arc=[64, 64])"], "policy_kwargs key 'net_arc' for DTDPGPolicy"),
+        (["--hyperparams", "policy_kwargs:dict(activation_fn='relu')"], "must be a class (e.g. torch.nn.ReLU), got"),
+        (["--hyperparams", "replay_buffer_kwargs:dict(foo=1)"], "unexpected keyword argument 'foo'"),
+        (["--hyperparams", "optimize_memory_usage:True"], "does not support optimize_memory_usage"),
+        (["--hyperparams", "action_noise:0.1"], "action_noise must be an ActionNoise (e.g. NormalActionNoise(mean, sigma))"),
         (["--n-seed", "3"], "unrecognized arguments: --n-seed 3"),  # no abbreviations, the subcommand's error
         (["--bogus"], "unrecognized arguments: --bogus"),
     ],
@@ -50,6 +56,23 @@ def test_train_user_errors_create_nothing(extra, message, tmp_path, monkeypatch,
     monkeypatch.chdir(tmp_path)  # the default --out and --tb are relative: nothing may appear here
     code, printed = run_cli(["train", "--algo", "dtdpg", "--scenario", "small", "--episodes", "40", *extra], capsys)
     assert_one_error_line(code, printed, "train", message)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_env_whose_package_is_missing_is_a_user_error(tmp_path, monkeypatch, capsys):
+    import gymnasium as gym
+
+    def needs_a_missing_package(**kwargs):
+        raise gym.error.DependencyNotInstalled('MuJoCo is not installed, run `pip install "gymnasium[mujoco]"`')
+
+    gym.register("MissingPackage-v0", entry_point=needs_a_missing_package)
+    monkeypatch.chdir(tmp_path)
+    try:
+        code, printed = run_cli(["train", "--algo", "ddpg", "--env", "MissingPackage-v0", "--timesteps", "200"], capsys)
+    finally:
+        del gym.registry["MissingPackage-v0"]
+    message = "--env MissingPackage-v0 cannot be made here: DependencyNotInstalled: MuJoCo is not installed"
+    assert_one_error_line(code, printed, "train", message)  # was a traceback
     assert list(tmp_path.iterdir()) == []
 
 

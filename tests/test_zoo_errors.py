@@ -28,6 +28,8 @@ def zoo_train(tmp_path, *args):
         ("  gamma: 5\n", "or -params): gamma must be a number in [0, 1], got 5"),
         ("  seed: 3\n", "or -params): set it with --seed, not as a hyperparameter"),
         ("  batch_size: 1\n", "batch_size must be at least 2 with batch normalisation"),
+        ('  policy_kwargs: "dict(net_arc=[64])"\n', "unknown policy_kwargs key 'net_arc' for DTDPGPolicy"),  # traceback
+        ("  policy_kwargs: \"dict(activation_fn='relu')\"\n", "must be a class (e.g. torch.nn.ReLU), got the string"),
         (
             "  phases:\n    - {name: dest, n_episodes: 2}\n    - {name: mqi}\n",
             "phases (env Pendulum-v1 in ",  # an env without reward phases

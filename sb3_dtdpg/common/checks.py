@@ -158,6 +158,12 @@ def check_action_noise(owner: str, noise: Any, action_shape: tuple[int, ...]) ->
     :raises ValueError: the noise's draws do not broadcast to one action (SB3 would fail at the first noisy step, or
         widen the action), naming both shapes
     """
+    from stable_baselines3.common.noise import ActionNoise
+
+    if noise is not None and not isinstance(noise, ActionNoise):  # SB3 calls it at the first noisy step
+        raise ValueError(
+            f"{owner}: action_noise must be an ActionNoise (e.g. NormalActionNoise(mean, sigma)) or None, got {noise!r}"
+        )
     shape = _noise_shape(owner, noise) if noise is not None else None
     if shape is None:
         return
