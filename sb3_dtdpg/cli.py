@@ -327,6 +327,14 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
     from sb3_dtdpg.common.files import atomic_write, safe_name
     from sb3_dtdpg.experiments.runs import EpisodeReturnLogger
 
+    run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}"
+    out = Path(args.out)
+    for name in (f"{run_name}.zip", f"{run_name}_interrupted.zip"):
+        if (out / name).exists():  # runs on other envs are not resumed: a new one would replace it
+            args.error(
+                f"--out {out} holds {name}, a model of an earlier train of {args.algo} on {args.env} with seed "
+                f"{args.seed}; move it, or use another --out or --seed"
+            )
     model = make_model(
         args.algo,
         env,
@@ -343,8 +351,6 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
     else:
         total = args.episodes * env.spec.max_episode_steps
         callbacks.append(StopTrainingOnMaxEpisodes(args.episodes))
-    run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}"
-    out = Path(args.out)
     try:
         model.learn(
             total_timesteps=total, callback=callbacks, log_interval=1, tb_log_name=run_name, progress_bar=not args.no_progress
@@ -361,7 +367,9 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
         return 130
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / f"{run_name}.zip", model.save)
-    mean, std = evaluate_policy(model, env, n_eval_episodes=args.eval_episodes, deterministic=True)
+    eval_env = model.get_env()
+    eval_env.seed(args.eval_seed)  # the test episodes' resets, as --eval-seed says (was the training env's next ones)
+    mean, std = evaluate_policy(model, eval_env, n_eval_episodes=args.eval_episodes, deterministic=True)
     print(
         f"{run_name}: {model.num_timesteps} steps; test ({args.eval_episodes} episodes): reward {mean:.1f} ± {std:.1f}; "
         f"model saved to {out / (run_name + '.zip')}"
@@ -424,11 +432,16 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         status = _failed_runs_status(args, _run_reproduce)
     if args.budget != "paper":
         paper = BUDGETS["paper"]
+        chosen = "".join(  # the user's choices that are not the defaults: the same runs at the paper's scale
+            f" --{option} {value}"
+            for option, value, default in (("preset", args.hyperparams, "tuned"), ("observation", args.observation, "goal"))
+            if value != default
+        )
         print(
             f"This was the {args.budget!r} budget ({budget.episodes} training episodes per run). The paper's scale "
             f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; on 2 cores about 75 minutes "
             "without the paper-task experiment, which takes about 5 hours more): "
-            f"sb3-dtdpg reproduce --budget paper --out <folder>"
+            f"sb3-dtdpg reproduce --budget paper{chosen} --out <folder>"
         )
     return status
 
@@ -991,7 +1004,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return args.func(args)
     except KeyboardInterrupt:
-        print("interrupted: finished runs are saved; run the same command again to resume", file=sys.stderr)
+        if args.command in ("compare", "reproduce", "train"):  # jobs of runs, each written as it finishes
+            print("interrupted: finished runs are saved; run the same command again to resume", file=sys.stderr)
+        else:  # one piece of work, its output written at its end
+            print(f"interrupted: {args.command} stopped before its end (nothing to resume: run it again)", file=sys.stderr)
         return 130
 
 

@@ -5,6 +5,7 @@ Needs the ``zoo`` extra.
 """
 
 import sys
+import traceback
 
 
 def main() -> None:
@@ -16,7 +17,14 @@ def main() -> None:
     import rl_zoo3.enjoy
 
     register_dtdpg()
-    rl_zoo3.enjoy.enjoy()
+    try:
+        rl_zoo3.enjoy.enjoy()
+    except (AssertionError, ValueError) as error:
+        # The zoo's own checks of the log folder and the model file (asserts among them) are the user's error
+        if traceback.extract_tb(error.__traceback__)[-1].name != "get_model_path":
+            raise
+        print(f"python -m sb3_dtdpg.enjoy: error: {error}", file=sys.stderr)
+        sys.exit(2)
 
 
 if __name__ == "__main__":

@@ -267,8 +267,8 @@ def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the m
         return
     differences = [_difference(key, recorded, actual) for key in CHECKED if _differs(key, recorded, actual)]
     if differences:
-        file = _scenario_file_of(recorded)
-        scenario_option = f"--scenario {file} " if file else ""
+        scenario = _scenario_file_of(recorded) or recorded.get("scenario")  # a file's path, else a built-in's name
+        scenario_option = f"--scenario {scenario} " if scenario else ""
         raise EnvSettingsMismatch(
             f"{what} was trained with {', '.join(differences)}; build the env with those settings, e.g. "
             f"{_make_call(recorded)} (sb3-dtdpg: {scenario_option}--observation {recorded.get('observation')} "

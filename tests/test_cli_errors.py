@@ -1,6 +1,7 @@
 """User errors of the command line: one ``error:`` line of the subcommand, exit status 2, nothing created."""
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -290,3 +291,43 @@ def test_reproduce_report_only_without_finished_runs_creates_nothing(folder, tmp
     args = cli.build_parser().parse_args(argv)
     args.hyperparams = "tuned"
     cli._check_finished_runs(args, specs)
+
+
+def test_ctrl_c_of_a_command_without_runs_does_not_promise_a_resume(tmp_path, monkeypatch, capsys):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "_cmd_map", interrupted)
+    assert main(["map", "--scenario", "small", "--out", str(tmp_path)]) == 130
+    message = capsys.readouterr().err  # was "finished runs are saved; run the same command again to resume"
+    assert message.strip() == "interrupted: map stopped before its end (nothing to resume: run it again)"
+
+
+def test_reproduces_hint_at_the_papers_scale_keeps_the_users_choices(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(cli, "_failed_runs_status", lambda args, job: 0)  # the hint alone, no runs
+    base = ["reproduce", "--budget", "tiny", "--out", str(tmp_path), "--no-progress"]
+    assert main([*base, "--preset", "paper", "--observation", "destinations"]) == 0
+    assert "sb3-dtdpg reproduce --budget paper --preset paper --observation destinations --out <folder>" in (
+        capsys.readouterr().out  # was without them: the tuned preset and goal observation at the paper's scale
+    )
+    assert main(base) == 0
+    assert "sb3-dtdpg reproduce --budget paper --out <folder>" in capsys.readouterr().out
+
+
+def test_train_on_another_env_keeps_an_earlier_model_and_tests_on_its_eval_seed(tmp_path, capsys):
+    def train(out, eval_seed):
+        argv = ["train", "--algo", "ddpg", "--preset", "paper", "--env", "Pendulum-v1", "--timesteps", "200"]
+        argv += ["--eval-episodes", "2", "--eval-seed", str(eval_seed), "--no-progress", "--out", str(tmp_path / out)]
+        code = main(argv)
+        printed = capsys.readouterr()
+        return code, printed, re.search(r"reward (\S+ ± \S+)", printed.out)
+
+    first = train("a", 1)
+    model = tmp_path / "a" / "ddpg_Pendulum-v1_s0.zip"
+    saved = model.read_bytes()
+    with pytest.raises(SystemExit):
+        train("a", 1)  # was trained again, replacing the first model
+    assert "--out " in capsys.readouterr().err and model.read_bytes() == saved
+    same, other = train("b", 1), train("c", 999)
+    assert first[0] == same[0] == other[0] == 0
+    assert first[2].group(1) == same[2].group(1) != other[2].group(1)  # --eval-seed was ignored: one test either way

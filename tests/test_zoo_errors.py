@@ -105,3 +105,20 @@ def test_a_dtdpg_search_on_an_env_without_reward_phases_is_one_error_line(tmp_pa
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
     errors = [line for line in done.stderr.splitlines() if ": error: " in line]
     assert len(errors) == 1 and "Pendulum-v1 has no reward phases: search on a NomaRadioMap env" in errors[0]
+
+
+def test_enjoy_without_a_model_is_one_error_line(tmp_path):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "envs"), os.environ.get("PYTHONPATH", "")])}
+    command = [sys.executable, "-m", "sb3_dtdpg.enjoy", "--algo", "dtdpg", "--env", "Pendulum-v1", "--no-render"]
+    (tmp_path / "empty" / "dtdpg" / "Pendulum-v1_1").mkdir(parents=True)
+    for folder, message in (("nowhere", "folder was not found"), ("empty", "No model found for dtdpg on Pendulum-v1")):
+        done = subprocess.run(
+            [*command, "-f", str(tmp_path / folder), "--exp-id", "0" if folder == "nowhere" else "1", "-n", "5"],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=tmp_path,
+            timeout=300,
+        )
+        assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]  # was an AssertionError
+        assert done.stderr.startswith("python -m sb3_dtdpg.enjoy: error: ") and message in done.stderr
