@@ -324,9 +324,11 @@ def check_output_file(option: str, value: str | Path, model: str | Path) -> None
         folders.add(model_path.resolve().parents[2])
     name = target.name.lower()
     owned = name in RUN_RECORDS or (name.startswith("phase_") and name.endswith(".zip"))
-    if owned and target.resolve().parent in folders:
+    parent = target.resolve().parent
+    another_run = parent.parent.name == "runs" and any((parent / record).exists() for record in RUN_RECORDS)
+    if owned and (parent in folders or another_run):
         raise ValueError(
-            f"{option} {value}: {target.name} is a record of the model's run folder {target.parent} (train, compare "
+            f"{option} {value}: {target.name} is a record of the run folder {target.parent} (train, compare "
             "and reproduce own it); write the results elsewhere"
         )
 

@@ -272,8 +272,19 @@ def test_evaluate_refuses_to_write_over_its_runs_records(run_folder, capsys, opt
         target.write_text('{"kept": true}')
     stored = {path.name: path.read_bytes() for path in run_folder.iterdir()}
     code, printed = run_cli(["evaluate", str(run_folder / "model.zip"), option, str(target)], capsys)
-    assert_one_error_line(code, printed, "evaluate", f"{option} {target}: {name} is a record of the model's run folder")
+    assert_one_error_line(code, printed, "evaluate", f"{option} {target}: {name} is a record of the run folder")
     assert {path.name: path.read_bytes() for path in run_folder.iterdir()} == stored
+
+
+def test_evaluate_refuses_to_write_over_another_runs_record(run_folder, tmp_path, capsys):
+    import shutil
+
+    other = tmp_path / "copy" / "runs" / run_folder.name
+    shutil.copytree(run_folder, other)
+    stored = (other / "result.json").read_bytes()
+    code, printed = run_cli(["evaluate", str(run_folder / "model.zip"), "--json", str(other / "result.json")], capsys)
+    assert_one_error_line(code, printed, "evaluate", "result.json is a record of the run folder")  # was replaced
+    assert (other / "result.json").read_bytes() == stored
 
 
 def test_evaluate_and_enjoy_refuse_to_write_over_the_model_itself(saved_dtdpg, tmp_path, capsys):

@@ -46,6 +46,9 @@ __all__ = [
 ]
 
 
+#: A run's record of its finished training, written after its ``model.zip`` and before its evaluations
+TRAINED_RECORD = "trained.json"
+
 #: The files a run of ``train``/``compare``/``reproduce`` owns in its folder ``<out>/runs/<run id>/`` (written here
 #: and by :func:`sb3_dtdpg.experiments.runs.run_one`), besides the curriculum's ``phase_<k>_<name>.zip`` and the
 #: ``checkpoints/`` folder
@@ -54,6 +57,7 @@ RUN_RECORDS: tuple[str, ...] = (
     "progress.json",
     "checkpoint.json",
     "failed.json",
+    TRAINED_RECORD,
     "model.zip",
     "replay_buffer.pkl",
 )
@@ -427,10 +431,6 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
             f"delete {pointer} to start the run afresh"
         )
     return checkpoint
-
-
-#: A run's record of its finished training, written after its ``model.zip`` and before its evaluations
-TRAINED_RECORD = "trained.json"
 
 
 def read_trained(run_dir: str | Path, identity: dict[str, Any]) -> dict[str, Any] | None:
