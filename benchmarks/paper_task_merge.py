@@ -4,8 +4,11 @@ A job that ran some seeds and a later one that ran the others (each writes ``pap
 table over all of them, with the same statistics as ``reproduce``'s (mean and 95 % CI over seeds, DT-DPG - DDPG
 paired by seed) and the reference planners' rows on the same test missions::
 
-    python benchmarks/paper_task_merge.py docs/csv/mall_2026-12-03/paper_task_runs.csv \\
-        results/paper_task/paper_task_runs.csv --out results/paper_task_merged
+    python benchmarks/paper_task_merge.py results/paper_task_a/paper_task_runs.csv \\
+        results/paper_task_b/paper_task_runs.csv --out results/paper_task_merged
+
+Merge runs of one room only: the planners' rows are those of today's room, and the CSVs do not say which room
+their runs trained on (docs/csv/mall_2026-12-03/ holds runs of the room before its last calibration).
 
 The runs trained with Rayleigh fading (``paper_task_reality_runs.csv``) merge the same way into
 ``paper_task_reality*`` tables: the training channel is read from the runs' ``training`` column, and runs of

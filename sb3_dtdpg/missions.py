@@ -64,7 +64,7 @@ def default_phases(
 def paper_phases(destination_episodes: int = 300) -> list[Phase]:
     """
     The mission's curriculum of the paper's settings (:func:`sb3_dtdpg.presets.preset` ``"paper"``, docs/ZOO.md,
-    "The paper's settings"): the two phases of Algorithm 1 with the OU scales of Section V, 0.5 then 0.4, each
+    "Presets"): the two phases of Algorithm 1 with the OU scales of Section V, 0.5 then 0.4, each
     decayed linearly. Where the paper is silent: the destination phase lasts ``destination_episodes`` (default
     300 of the paper's 500 episodes) with no early transfer and its noise decays to 0.1 over the phase; the MQI
     phase's noise decays to 0.05 over 200 episodes (the rest of the paper's 500, whatever ``destination_episodes``
