@@ -331,8 +331,9 @@ def run_one(
     saves its network at the end of the destination phase (the paper's theta_X), which is evaluated too ("before transfer").
 
     Without ``resume``, leftovers of an interrupted attempt are removed and the run starts afresh (so that a
-    run's result depends on its seed only). With ``resume``, a finished run's result is returned as is and an
-    interrupted one continues from its last checkpoint (model, replay buffer, action noise and curriculum
+    run's result depends on its seed only). With ``resume``, a finished run's result is returned as is, one
+    interrupted in its evaluations is evaluated again (its trained ``model.zip``, :data:`TRAINED_RECORD`), and one
+    interrupted in training continues from its last checkpoint (model, replay buffer, action noise and curriculum
     state; not the environment's random state, so a resumed run is not bit-identical to an uninterrupted one).
 
     :param spec: the run
