@@ -74,6 +74,11 @@ def _user_errors(args: argparse.Namespace) -> Iterator[None]:
         args.error(str(error))
 
 
+def _not_enough_memory(args: argparse.Namespace, error: MemoryError) -> None:
+    """Report a ``MemoryError`` of building or training a model as a usage error (the settings ask too much)."""
+    args.error(f"not enough memory for this run ({error or 'MemoryError'}): lower buffer_size or batch_size")
+
+
 def _busy_folder_errors(args: argparse.Namespace) -> contextlib.AbstractContextManager[None]:
     """
     A folder in use by another job (``OutputBusyError``), one holding another run under the same id
@@ -231,6 +236,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
             if not args.overrides:
                 raise
             args.error(f"--hyperparams {given}: the model cannot be built with these ({error})")
+        except MemoryError as error:
+            _not_enough_memory(args, error)
     max_steps = int(env.unwrapped.scenario.mission.max_steps) if mission else env.spec.max_episode_steps
     if args.timesteps is None and max_steps is None:
         args.error(f"--episodes: {args.env} has no episode step limit to turn episodes into steps; give --timesteps")
@@ -288,7 +295,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
                 verbose=args.verbose,
             )
     except MemoryError as error:
-        args.error(f"not enough memory for this run ({error or 'MemoryError'}): lower buffer_size or batch_size")
+        _not_enough_memory(args, error)
     except KeyboardInterrupt:
         try:
             checkpoint = read_checkpoint(run_dir)
@@ -329,12 +336,11 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
 
     run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}"
     out = Path(args.out)
-    for name in (f"{run_name}.zip", f"{run_name}_interrupted.zip"):
-        if (out / name).exists():  # runs on other envs are not resumed: a new one would replace it
-            args.error(
-                f"--out {out} holds {name}, a model of an earlier train of {args.algo} on {args.env} with seed "
-                f"{args.seed}; move it, or use another --out or --seed"
-            )
+    if (out / f"{run_name}.zip").exists():  # runs on other envs are not resumed: a new one would replace it
+        args.error(
+            f"--out {out} holds {run_name}.zip, the model of an earlier train of {args.algo} on {args.env} with seed "
+            f"{args.seed}; move it, or use another --out or --seed"
+        )
     model = make_model(
         args.algo,
         env,
@@ -369,7 +375,12 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
     atomic_write(out / f"{run_name}.zip", model.save)
     eval_env = model.get_env()
     eval_env.seed(args.eval_seed)  # the test episodes' resets, as --eval-seed says (was the training env's next ones)
-    mean, std = evaluate_policy(model, eval_env, n_eval_episodes=args.eval_episodes, deterministic=True)
+    try:
+        mean, std = evaluate_policy(model, eval_env, n_eval_episodes=args.eval_episodes, deterministic=True)
+    except KeyboardInterrupt:
+        print(f"interrupted in the test episodes: the trained model is in {out / (run_name + '.zip')}", file=sys.stderr)
+        env.close()
+        return 130
     print(
         f"{run_name}: {model.num_timesteps} steps; test ({args.eval_episodes} episodes): reward {mean:.1f} ± {std:.1f}; "
         f"model saved to {out / (run_name + '.zip')}"
@@ -439,7 +450,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         )
         print(
             f"This was the {args.budget!r} budget ({budget.episodes} training episodes per run). The paper's scale "
-            f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; on 2 cores about 75 minutes "
+            f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; on 2 cores about 45 minutes "
             "without the paper-task experiment, which takes about 5 hours more): "
             f"sb3-dtdpg reproduce --budget paper{chosen} --out <folder>"
         )
@@ -960,7 +971,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=_EXPERIMENTS,
         default=None,
         help="train only the runs of these experiments (default: all but paper_task_reality; at the paper's scale about "
-        "75 minutes on 2 cores without the paper task, which takes about 5 hours more); the tables use every finished run",
+        "45 minutes on 2 cores without the paper task, which takes about 5 hours more); the tables use every finished run",
     )
     p.add_argument(
         "--multiple-access",

@@ -267,7 +267,9 @@ def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the m
         return
     differences = [_difference(key, recorded, actual) for key in CHECKED if _differs(key, recorded, actual)]
     if differences:
-        scenario = _scenario_file_of(recorded) or recorded.get("scenario")  # a file's path, else a built-in's name
+        scenario = _scenario_file_of(recorded)  # a file's path, else the name of the built-in it is
+        if scenario is None and recorded.get("scenario_digest") == builtin_scenario_digest(str(recorded.get("scenario"))):
+            scenario = recorded.get("scenario")
         scenario_option = f"--scenario {scenario} " if scenario else ""
         raise EnvSettingsMismatch(
             f"{what} was trained with {', '.join(differences)}; build the env with those settings, e.g. "

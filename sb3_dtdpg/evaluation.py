@@ -9,9 +9,8 @@ evaluated with the same seed, so two policies are compared on paired episodes.
 
 from __future__ import annotations
 
-import contextlib
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -139,27 +138,19 @@ class EvaluationResult:
         return out
 
 
-@contextlib.contextmanager
-def _closing(env: gym.Env, on_error_only: bool = False) -> Iterator[None]:
-    """Close an env built here when the block raises (and after it, unless ``on_error_only``)."""
-    try:
-        yield
-    except BaseException:
-        env.close()
-        raise
-    if not on_error_only:
-        env.close()
+#: What :func:`evaluate` says of an env that is not a mission env (the missions are what it measures)
+_NOT_A_MISSION_ENV = (
+    "evaluate measures the missions of noma_radiomap's envs (e.g. NomaRadioMap-v0); {name} is {kind}: use SB3's "
+    "evaluate_policy for other envs"
+)
 
 
 def _check_mission_env(env: gym.Env, name: str) -> None:
-    """:raises ValueError: ``env`` is not a mission env of ``noma_radiomap`` (the missions measured here), naming it"""
+    """:raises ValueError: ``env`` is not a mission env of ``noma_radiomap``, naming it"""
     from noma_radiomap import NomaRadioMapEnv
 
     if not isinstance(env.unwrapped, NomaRadioMapEnv):
-        raise ValueError(
-            f"evaluate measures the missions of noma_radiomap's envs (e.g. NomaRadioMap-v0); {name} is a "
-            f"{type(env.unwrapped).__name__}: use SB3's evaluate_policy for other envs"
-        )
+        raise ValueError(_NOT_A_MISSION_ENV.format(name=name, kind=f"a {type(env.unwrapped).__name__}"))
 
 
 def _make_env(
@@ -177,16 +168,11 @@ def _make_env(
             if wanted is not None:
                 kwargs[name] = wanted
         kwargs.setdefault("channel", "rayleigh")  # the test missions' channel, unless given either way
-        try:
-            env = gym.make(env_id_or_env, **kwargs)
-        except TypeError:  # e.g. "unexpected keyword argument 'channel'": another kind of env, or a misspelt kwarg
-            env = gym.make(env_id_or_env)
-            with _closing(env):
-                _check_mission_env(env, env_id_or_env)
-            raise
-        with _closing(env, on_error_only=True):
-            _check_mission_env(env, env_id_or_env)
-        return env, True
+        from sb3_dtdpg.baselines import is_mission_env
+
+        if not is_mission_env(env_id_or_env):  # it would not take the mission's keyword arguments
+            raise ValueError(_NOT_A_MISSION_ENV.format(name=env_id_or_env, kind=f"{gym.spec(env_id_or_env).entry_point}"))
+        return gym.make(env_id_or_env, **kwargs), True
     if not isinstance(env_id_or_env, gym.Env):
         raise ValueError(f"env_id_or_env must be an env id or a gymnasium.Env, got {type(env_id_or_env).__name__}")
     _check_mission_env(env_id_or_env, "the given env")

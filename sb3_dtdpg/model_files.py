@@ -306,10 +306,11 @@ def _run_spec(result_file: Path) -> tuple[dict[str, Any], Any]:
 
 def check_output_file(option: str, value: str | Path, model: str | Path) -> None:
     """
-    Refuse an output file of ``evaluate``/``enjoy`` that would overwrite the model or a record of its run.
+    Refuse an output file of ``evaluate``/``enjoy`` that would overwrite the model or a record of a run.
 
     A run folder's records (:data:`RUN_RECORDS`, the curriculum's ``phase_*.zip``) are refused in the model's folder
-    whether or not it is a run folder: :func:`read_saved_model` reads a ``result.json`` beside any model as its run's.
+    whether or not it is a run folder (:func:`read_saved_model` reads a ``result.json`` beside any model as its
+    run's), and in any run folder (``<out>/runs/<run id>/`` holding a record).
 
     :param option: the option, for the message (``--json``)
     :param value: the output file

@@ -151,8 +151,9 @@ def check_constructor_kwargs(
     :param extra: further names that are valid besides the constructor's (e.g. the zoo's own keys)
     :param reserved: names the caller sets itself, each with the option that sets it (e.g. ``{"seed": "--seed"}``)
     :raises HyperparameterError: an unknown or reserved name (with the closest known ones or the option to use), a
-        learning rate that is not a positive finite number (or a schedule), a ``policy_kwargs`` that is not a dict or
-        whose ``net_arch`` is malformed or too large, a ``device`` torch does not know, or a numeric setting out of
+        learning rate that is not a positive finite number (or a schedule), a ``policy_kwargs`` that is not a dict,
+        names an argument the algorithm's ``MlpPolicy`` does not take, gives a string for a class or whose
+        ``net_arch`` is malformed or too large, a ``device`` torch does not know, or a numeric setting out of
         the range :func:`sb3_dtdpg.common.checks.check_off_policy_settings` allows
     """
     from sb3_dtdpg.common.checks import check_off_policy_settings

@@ -221,6 +221,37 @@ def test_an_interrupted_train_on_another_env_keeps_its_model_and_says_it_starts_
     assert "interrupted after 70 steps: the model so far is in" in message and "starts afresh" in message
     assert "resume" not in message  # there is nothing to resume from (was: "run the same command again to resume")
     assert load_model("ddpg", tmp_path / "ddpg_Pendulum-v1_s0_interrupted.zip").num_timesteps == 70
+    monkeypatch.undo()
+    args[args.index("3000")] = "200"
+    args += ["--preset", "paper", "--eval-episodes", "1", "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]
+    assert main(args) == 0  # afresh, beside the interrupted model
+    assert (tmp_path / "ddpg_Pendulum-v1_s0.zip").exists()
+    assert load_model("ddpg", tmp_path / "ddpg_Pendulum-v1_s0_interrupted.zip").num_timesteps == 70  # kept
+
+
+def test_train_on_another_env_interrupted_in_its_test_episodes_says_the_model_is_saved(tmp_path, monkeypatch, capsys):
+    from sb3_dtdpg import cli as cli_module
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("stable_baselines3.common.evaluation.evaluate_policy", interrupted)
+    args = ["train", "--algo", "ddpg", "--preset", "paper", "--env", "Pendulum-v1", "--timesteps", "200", "--no-progress"]
+    args += ["--out", str(tmp_path)]
+    assert cli_module.main(args) == 130
+    message = capsys.readouterr().err  # was "finished runs are saved; run the same command again to resume"
+    assert (
+        message.strip() == f"interrupted in the test episodes: the trained model is in {tmp_path / 'ddpg_Pendulum-v1_s0.zip'}"
+    )
+
+
+def test_a_buffer_too_large_for_memory_is_one_error_line(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    code, printed = run_cli(
+        ["train", "--algo", "dtdpg", "--scenario", "small", "--hyperparams", "buffer_size:2000000000"], capsys
+    )
+    assert_one_error_line(code, printed, "train", "not enough memory for this run")  # was a numpy traceback
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_the_option_choices_are_the_libraries(monkeypatch):

@@ -65,7 +65,9 @@ def test_a_mismatched_env_is_refused_with_the_settings_to_use(saved_dtdpg, kwarg
     with pytest.raises(EnvSettingsMismatch, match=named) as error:
         DTDPG.load(saved_dtdpg, env=small_env(**kwargs))
     assert "observation='goal', multiple_access='noma'" in str(error.value)  # the gym.make call that fits
-    assert "(sb3-dtdpg: --scenario small --observation goal --multiple-access noma)" in str(error.value)  # no --scenario
+    assert "(sb3-dtdpg: --scenario small --observation goal --multiple-access noma)" in str(
+        error.value
+    )  # was without --scenario
     model = DTDPG.load(saved_dtdpg)
     with pytest.raises(EnvSettingsMismatch, match=named):
         model.set_env(small_env(**kwargs))

@@ -284,8 +284,9 @@ def test_a_scenario_changed_in_code_is_validated_by_the_env():
 
     small = load_scenario("small")
     rewarded_outage = dataclasses.replace(small, mission=dataclasses.replace(small.mission, outage_penalty=-5.0))
-    with pytest.raises(ValueError, match=r"mission\.outage_penalty: .*>= 0"):  # was a +5 reward for every outage step
+    with pytest.raises(ValueError, match=r"mission\.outage_penalty: .*>= 0") as error:  # was +5 for every outage step
         gym.make("NomaRadioMap-v0", scenario=rewarded_outage)
+    assert str(error.value).startswith("scenario 'small' (a Scenario object, as given): ")  # not the file's fault
     no_power = dataclasses.replace(small, ap=dataclasses.replace(small.ap, max_power_dbm=float("nan")))
     with pytest.raises(ValueError, match=r"ap\.max_power_dbm"):  # was NaN powers and MQI under a finite reward
         gym.make("NomaRadioMap-v0", scenario=no_power)

@@ -3,6 +3,7 @@ enters, the error naming the field and the value."""
 
 import re
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -202,3 +203,12 @@ def test_returns_given_in_replay_buffer_kwargs_that_the_model_would_replace_are_
         DTDPG("MlpPolicy", "Pendulum-v1", replay_buffer_kwargs=buffer_kwargs, **TINY)
     model = DTDPG("MlpPolicy", "Pendulum-v1", n_steps=3, replay_buffer_kwargs=dict(n_steps=3, gamma=0.99), **TINY)
     assert (model.replay_buffer.n_steps, model.replay_buffer.gamma) == (3, 0.99)  # the same values: taken as given
+
+
+def test_load_refuses_returns_in_replay_buffer_kwargs_that_the_model_would_replace(tmp_path):
+    DTDPG("MlpPolicy", "Pendulum-v1", n_steps=3, **TINY).save(tmp_path / "model.zip")
+    message = "DTDPG.load: replay_buffer_kwargs['n_steps'] = 5 differs from the model's n_steps = 3"
+    with pytest.raises(ValueError, match=re.escape(message)):  # was a buffer of 3-step returns, without a word
+        DTDPG.load(tmp_path / "model.zip", replay_buffer_kwargs={"n_steps": 5})
+    model = DTDPG.load(tmp_path / "model.zip", n_steps=5, replay_buffer_kwargs={"n_steps": 5}, env=gym.make("Pendulum-v1"))
+    assert model.replay_buffer.n_steps == 5

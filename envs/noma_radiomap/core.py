@@ -173,7 +173,10 @@ def load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
     """A scenario from a built-in name, a YAML path or a :class:`Scenario` (validated as a YAML file is)."""
     if isinstance(scenario, Scenario):
         # One built or changed in code (``dataclasses.replace``) has not been through the checks of ``from_dict``
-        Scenario.from_dict(scenario.to_dict(), scenario.source)
+        try:
+            Scenario.from_dict(scenario.to_dict())
+        except ValueError as error:
+            raise ValueError(f"scenario {scenario.name!r} (a Scenario object, as given): {error}") from None
         return scenario
     if isinstance(scenario, str | os.PathLike):
         return load_scenario(scenario)

@@ -4,8 +4,9 @@
 again, or Gymnasium importing it for an id written ``"noma_radiomap:NomaRadioMap-v0"`` (e.g. in a
 ``SubprocVecEnv`` worker started with ``spawn``), is harmless.
 
-Episodes are truncated only by Gymnasium's ``TimeLimit``, at the scenario's ``mission.max_steps``: the entry
-point :func:`make_env` builds the env and wraps it in a ``TimeLimit`` of its own scenario's length, so
+Episodes are truncated at the scenario's ``mission.max_steps``, by the env itself and by Gymnasium's ``TimeLimit``
+at the same step: the entry point :func:`make_env` builds the env and wraps it in a ``TimeLimit`` of its own
+scenario's length, so
 ``gymnasium.make("NomaRadioMap-v0", scenario="small").spec.max_episode_steps`` is ``small``'s 60 and the
 default ``mall`` gives 300 (the paper's task: 1000). ``gymnasium.make(..., max_episode_steps=n)`` adds a shorter
 limit on top: the env cannot see it, so every ``info`` of the single env carries the episode summary as of that

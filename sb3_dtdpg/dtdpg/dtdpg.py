@@ -210,14 +210,7 @@ class DTDPG(LeanStep, DDPG):
         # other n_steps or gamma (as SB3's own pick follows the model's n_steps and gamma)
         self._buffer_follows_returns = self.replay_buffer_class is None
         if self._buffer_follows_returns:
-            returns = {"n_steps": self.n_steps, "gamma": self.gamma}
-            for name, value in returns.items():  # the pick below sets them from the model's: a different one is lost
-                if name in self.replay_buffer_kwargs and self.replay_buffer_kwargs[name] != value:
-                    raise ValueError(
-                        f"DTDPG: replay_buffer_kwargs[{name!r}] = {self.replay_buffer_kwargs[name]!r} differs from the "
-                        f"model's {name} = {value!r}: the replay buffer's returns follow the constructor's n_steps and "
-                        f"gamma, pass {name}={self.replay_buffer_kwargs[name]!r} to DTDPG instead"
-                    )
+            _check_buffer_returns("DTDPG", self.replay_buffer_kwargs, {"n_steps": self.n_steps, "gamma": self.gamma})
             self._pick_replay_buffer()
 
         if _init_setup_model:
@@ -408,6 +401,9 @@ class DTDPG(LeanStep, DDPG):
             check_action_noise("DTDPG.load", kwargs["action_noise"], data["action_space"].shape)
         # a model saved before its buffer choice was recorded keeps its buffer (the constructor's flag would stand)
         kwargs.setdefault("_buffer_follows_returns", data.get("_buffer_follows_returns", False))
+        if kwargs["_buffer_follows_returns"] and "replay_buffer_kwargs" in kwargs:
+            returns = {name: kwargs.get(name, data.get(name)) for name in ("n_steps", "gamma")}
+            _check_buffer_returns("DTDPG.load", kwargs["replay_buffer_kwargs"], returns)
         saved = data.get("replay_buffer_kwargs") or {}
         kept = [f"{k}={saved[k]!r}" for k in ("n_steps", "gamma") if k in saved and kwargs.get(k, saved[k]) != saved[k]]
         if not kwargs["_buffer_follows_returns"] and "replay_buffer_kwargs" not in kwargs and kept:
@@ -416,6 +412,22 @@ class DTDPG(LeanStep, DDPG):
                 "followed the model's returns, or a buffer class given by hand): pass replay_buffer_kwargs to change them"
             )
         return super().load(path, env=env, device=device, custom_objects=custom_objects, **kwargs)
+
+
+def _check_buffer_returns(owner: str, buffer_kwargs: Mapping[str, Any] | None, returns: Mapping[str, Any]) -> None:
+    """
+    :param owner: where the settings are given, for the message
+    :param buffer_kwargs: the ``replay_buffer_kwargs`` given
+    :param returns: the model's ``n_steps`` and ``gamma``, from which a buffer that follows the returns sets its own
+    :raises ValueError: a value of ``buffer_kwargs`` that differs from the model's (it would be dropped)
+    """
+    for name, value in returns.items():
+        given = (buffer_kwargs or {}).get(name, value)
+        if given != value:
+            raise ValueError(
+                f"{owner}: replay_buffer_kwargs[{name!r}] = {given!r} differs from the model's {name} = {value!r}: "
+                f"the replay buffer's returns follow the model's n_steps and gamma, pass {name}={given!r} instead"
+            )
 
 
 #: The constructor's on/off settings

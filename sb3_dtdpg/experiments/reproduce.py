@@ -307,7 +307,7 @@ def run_reproduce(
 
     :param out: output folder
     :param budget: a budget name or :class:`~sb3_dtdpg.experiments.runs.Budget` (default ``"tiny"``: the whole
-        pipeline in minutes; ``"paper"`` is the paper's scale: on 2 cores about 75 minutes for the first three
+        pipeline in minutes; ``"paper"`` is the paper's scale: on 2 cores about 45 minutes for the first three
         experiments and about 5 hours more for the paper task, whose failing episodes last 1000 steps)
     :param seeds: seeds per configuration (default: the budget's)
     :param n_workers: parallel processes (default: the number of CPUs)
