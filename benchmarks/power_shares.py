@@ -3,8 +3,7 @@
 Under the env's mapping (paper Eq. (15e)) a robot's power is ``P_max (a_u + 1) / 2``, scaled down when the robots
 ask for more than ``P_max`` and never up; with ``power_mapping="shares"``
 (:class:`noma_radiomap.wrappers.PowerShares`) the robots under way always share the whole ``P_max`` in the ratio of
-their ``(a_u + 1) / 2``. On the room of 2026-12-03 ``benchmarks/learner_gap.py`` showed the learners losing most of
-their distance to the shortest-path planner to their power split; this measures what the mapping changes. For each
+their ``(a_u + 1) / 2``; this measures what the mapping changes (docs/RESULTS.md, "Power as shares of ``P_max``"). For each
 seed and mode, one DT-DPG run (``--algos``: also DDPG) with each mapping at the budget's scale (the tuned settings
 and goal observation of ``compare``), tested on the 20 Rayleigh test missions of ``compare``; printed: each arm's
 mean test MQI (95 % t-interval over the seeds), the paired difference shares - paper, and the two planners on the

@@ -1,5 +1,5 @@
 """The paper's central claim on the paper's own task: DDPG vs DT-DPG, Table I and the tuned preset
-(docs/RESULTS_mall_2026-12-03.md).
+(docs/RESULTS.md, "The paper's task").
 
 The paper (Sec. V) reports that under the same training constraints DDPG finds the destination in fewer than
 20 % of its training episodes and DT-DPG in more than 95 %. This experiment trains both on the paper's task
