@@ -147,9 +147,9 @@ _NOT_A_MISSION_ENV = (
 
 def _check_mission_env(env: gym.Env, name: str) -> None:
     """:raises ValueError: ``env`` is not a mission env of ``noma_radiomap``, naming it"""
-    from noma_radiomap import NomaRadioMapEnv
+    from sb3_dtdpg.baselines import _is_mission
 
-    if not isinstance(env.unwrapped, NomaRadioMapEnv):
+    if not _is_mission(env):
         raise ValueError(_NOT_A_MISSION_ENV.format(name=name, kind=f"a {type(env.unwrapped).__name__}"))
 
 

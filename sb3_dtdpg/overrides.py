@@ -108,6 +108,12 @@ def _check_net_arch(net_arch: Any, where: str) -> None:
             )
 
 
+def _closest(name: str, known: list[str]) -> str:
+    """:return: ``"; did you mean ..."`` with the known names closest to an unknown one (empty where none is close)"""
+    close = difflib.get_close_matches(name, known, n=3)
+    return f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+
+
 #: Policy arguments that take a class (a string names none: the CLI's --hyperparams reads Python literals only)
 _CLASS_ARGUMENTS = ("activation_fn", "optimizer_class", "features_extractor_class")
 
@@ -122,9 +128,9 @@ def _check_policy_kwargs(algo_class: type, policy_kwargs: Mapping[str, Any], whe
             known = [name for name in parameters if name not in ("observation_space", "action_space", "lr_schedule")]
             for name in policy_kwargs:
                 if name not in known:
-                    close = difflib.get_close_matches(name, known, n=3)
-                    hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
-                    raise HyperparameterError(f"unknown policy_kwargs key {name!r} for {policy_class.__name__}{where}{hint}")
+                    raise HyperparameterError(
+                        f"unknown policy_kwargs key {name!r} for {policy_class.__name__}{where}{_closest(name, known)}"
+                    )
     for name in _CLASS_ARGUMENTS:
         if isinstance(policy_kwargs.get(name), str):
             literal = "--hyperparams" in where  # the CLI's: Python literals only
@@ -165,8 +171,7 @@ def check_constructor_kwargs(
         if name in (reserved or {}):
             raise HyperparameterError(f"{name}{where}: set it with {reserved[name]}, not as a hyperparameter")
         if name not in known:
-            close = difflib.get_close_matches(name, known, n=3)
-            hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+            hint = _closest(name, known)
             raise HyperparameterError(f"unknown hyperparameter {name!r} for {algo_class.__name__}{where}{hint}")
     rate = kwargs.get("learning_rate")
     if rate is not None and not callable(rate) and not (_is_number(rate) and math.isfinite(rate) and rate > 0):

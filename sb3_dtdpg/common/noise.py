@@ -13,6 +13,8 @@ from stable_baselines3.common.noise import (
     VectorizedActionNoise,
 )
 
+from sb3_dtdpg.common.checks import _is_real
+
 
 def _as_sigma(name: str, value: float | np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     try:
@@ -42,7 +44,7 @@ def _check_process(mean: Any, sigma: Any, theta: Any = 0.15, dt: Any = 1e-2, ini
         raise ValueError(f"mean must be an array of finite numbers (its shape is the action shape), got {mean!r}")
     _as_sigma("sigma", sigma, array.shape)
     for name, value in (("theta", theta), ("dt", dt)):
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value) or value <= 0:
+        if not _is_real(value) or value <= 0:
             raise ValueError(f"{name} must be finite and > 0, got {value!r}")
     if initial_noise is not None:
         try:
@@ -134,7 +136,6 @@ class LinearDecayOUNoise(ActionNoise):
         dtype: DTypeLike = np.float32,
     ) -> None:
         mean = _check_process(mean, sigma, theta, dt, initial_noise)
-        _as_sigma("final_sigma", final_sigma, mean.shape)
         super().__init__()
         self._schedule = _EpisodeSchedule(
             _as_sigma("sigma", sigma, mean.shape),
