@@ -443,11 +443,14 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         status = _failed_runs_status(args, _run_reproduce)
     if args.budget != "paper":
         paper = BUDGETS["paper"]
-        chosen = "".join(  # the user's choices that are not the defaults: the same runs at the paper's scale
-            f" --{option} {value}"
-            for option, value, default in (("preset", args.hyperparams, "tuned"), ("observation", args.observation, "goal"))
-            if value != default
+        from noma_radiomap.observations import DEFAULT_OBSERVATION
+
+        defaults = (
+            ("preset", args.hyperparams, default_preset(("dtdpg", "ddpg"))),
+            ("observation", args.observation, DEFAULT_OBSERVATION),
         )
+        # the user's choices that are not the defaults: the same runs at the paper's scale
+        chosen = "".join(f" --{option} {value}" for option, value, default in defaults if value != default)
         print(
             f"This was the {args.budget!r} budget ({budget.episodes} training episodes per run). The paper's scale "
             f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; on 2 cores about 45 minutes "
