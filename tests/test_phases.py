@@ -1,6 +1,7 @@
 import json
 import pickle
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -54,6 +55,18 @@ def test_bad_field_names_field_and_value(kwargs, field, value):
     assert value in str(info.value)
 
 
+def test_early_transfer_that_cannot_happen_is_warned():
+    """A success window longer than the phase's episode budget never fills: the threshold would be dead silently."""
+    with pytest.warns(UserWarning, match=r"success_window=20 is longer than the phase's n_episodes=10"):
+        (destination, _) = default_phases(destination_episodes=10)
+    assert destination.success_threshold == 0.95
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Phase("a", n_episodes=20, success_threshold=0.9, success_window=20)
+        Phase("a", n_episodes=10, success_window=20)  # no early transfer asked for
+        Phase("a", n_timesteps=10, success_threshold=0.9, success_window=20)  # steps, not episodes
+
+
 def test_decay_without_horizon():
     with pytest.raises(ValueError, match="decay_episodes"):
         parse_phases([Phase("a", n_timesteps=10, sigma=0.5, final_sigma=0.1)])
@@ -98,10 +111,10 @@ def test_round_trips():
 
 
 def test_numpy_numbers_are_the_python_numbers_they_hold():
-    phase = Phase("a", n_episodes=np.int64(3), sigma=np.float32(0.25), success_threshold=np.float64(0.5))
-    assert (phase.n_episodes, phase.sigma, phase.success_threshold) == (3, 0.25, 0.5)
+    phase = Phase("a", n_episodes=np.int64(30), sigma=np.float32(0.25), success_threshold=np.float64(0.5))
+    assert (phase.n_episodes, phase.sigma, phase.success_threshold) == (30, 0.25, 0.5)
     assert type(phase.n_episodes) is int and type(phase.sigma) is float
-    assert json.loads(json.dumps(phase.to_dict()))["n_episodes"] == 3
+    assert json.loads(json.dumps(phase.to_dict()))["n_episodes"] == 30
     with pytest.raises(ValueError, match=r"n_episodes must be a positive integer or None, got 2\.5"):
         Phase("a", n_episodes=np.float64(2.5))
 

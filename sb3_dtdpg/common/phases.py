@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -44,7 +45,8 @@ class Phase:
     :param decay_episodes: Length of the linear decay in episodes; defaults to ``n_episodes`` (or 1 when the
         phase has no episode budget and no decay, which makes it irrelevant).
     :param success_threshold: Early-transfer threshold on the success rate in ``(0, 1]``; ``None`` disables it.
-    :param success_window: Number K of most recent episodes of the phase over which the success rate is taken.
+    :param success_window: Number K of most recent episodes of the phase over which the success rate is taken
+        (a window longer than ``n_episodes`` never fills: warned, as the early transfer then never happens).
     :param replay_handling: What happens to the replay buffer when *entering* this phase: ``"keep"`` it,
         ``"clear"`` it, or ``"relabel"`` every stored reward for this phase from the stored reward components
         (needs :class:`sb3_dtdpg.common.buffers.RewardComponentsReplayBuffer`). Ignored for the first phase.
@@ -90,6 +92,13 @@ class Phase:
         threshold = self.success_threshold
         if threshold is not None and (not _is_real(threshold) or not 0 < threshold <= 1):
             raise ValueError(f"{where}: success_threshold must be in (0, 1] or None, got {threshold!r}")
+        if threshold is not None and self.n_episodes is not None and self.success_window > self.n_episodes:
+            warnings.warn(
+                f"{where}: success_window={self.success_window} is longer than the phase's "
+                f"n_episodes={self.n_episodes}: the early transfer at success_threshold={threshold} can never "
+                "happen (give n_episodes >= success_window or a shorter success_window)",
+                stacklevel=3,
+            )
         if self.replay_handling not in REPLAY_HANDLINGS:
             raise ValueError(f"{where}: replay_handling must be one of {REPLAY_HANDLINGS}, got {self.replay_handling!r}")
 
