@@ -13,7 +13,9 @@ Importing this module also imports :mod:`noma_radiomap`, so the NomaRadioMap env
 that says so.
 """
 
+import collections
 import dataclasses
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -207,6 +209,9 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
       ``--trial-id`` without ``--storage`` and ``--study-name`` is an error instead of being ignored.
     - A budget that cannot train (``n_timesteps <= learning_starts``) is an error
       (:func:`sb3_dtdpg.baselines.check_training_budget`).
+    - A search worker that joins a shared study whose ``--max-total-trials`` are all held by other workers' running
+      trials ends with a line that says so (the zoo read ``study.best_trial`` of a study without a completed
+      trial: a traceback); a study whose trials all ended without completing is an error line.
 
     Every saved model records the env settings it was trained with (:func:`sb3_dtdpg.env_settings.record`), so
     ``sb3-dtdpg evaluate`` / ``enjoy`` refuse a mismatched env for SB3's algorithms too. For DT-DPG training runs it
@@ -317,7 +322,30 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
                     f"-optimize with --algo dtdpg samples the mission's two reward phases (destination, mqi), and "
                     f"{self.env_name.gym_id} has no reward phases: search on a NomaRadioMap env"
                 )
-        super().hyperparameters_optimization()
+        try:
+            super().hyperparameters_optimization()
+        except ValueError:  # the zoo's study.best_trial of a study without a completed trial
+            states = self._trial_states()
+            if states is None or states.get("COMPLETE"):
+                raise
+            counts = ", ".join(f"{n} {state.lower()}" for state, n in sorted(states.items())) or "no trials"
+            if not states.get("RUNNING"):
+                raise ZooOptionError(
+                    f"no trial of the study {self.study_name!r} completed ({counts}): no best trial"
+                ) from None
+            print(
+                f"The study {self.study_name!r} has no completed trial yet ({counts}) and the other workers hold all "
+                f"of its --max-total-trials {self.max_total_trials}: nothing for this worker to run; the best trial "
+                "is in the report of the worker that finishes last",
+                file=sys.stderr,
+            )
+
+    def _trial_states(self) -> dict[str, int] | None:
+        """:return: the number of the study's trials in each state (``{"RUNNING": 2}``), None without a storage"""
+        if self.storage is None or self.study_name is None:
+            return None
+        study = optuna.load_study(storage=self._optuna_storage(self.storage), study_name=self.study_name)
+        return dict(collections.Counter(trial.state.name for trial in study.trials))
 
     def _save_config(self, saved_hyperparams: dict[str, Any]) -> None:
         # The zoo's enjoy lets args.yml's env_kwargs replace config.yml's: args.yml gets the merged ones

@@ -122,3 +122,27 @@ def test_enjoy_without_a_model_is_one_error_line(tmp_path):
         )
         assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]  # was an AssertionError
         assert done.stderr.startswith("python -m sb3_dtdpg.enjoy: error: ") and message in done.stderr
+
+
+def test_a_search_worker_that_finds_every_trial_taken_ends_without_a_traceback(tmp_path):
+    """A worker that joins a shared study whose --max-total-trials are all held by other workers, none finished, has
+    nothing to run: the zoo then read ``study.best_trial`` of a study without a completed trial (a ValueError)."""
+    import optuna
+
+    storage = str(tmp_path / "study.log")
+    study = optuna.create_study(
+        storage=optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(storage)),
+        study_name="shared",
+        direction="maximize",
+    )
+    study.ask()  # a trial another worker is running
+    search = ["--env", "NomaRadioMap-v0", "-optimize", "--storage", storage, "--study-name", "shared"]
+    search += ["--max-total-trials", "1", "-n", "300", "-params", "learning_starts:50", "--env-kwargs", "scenario:'small'"]
+    done = zoo_train(tmp_path, *search)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert "has no completed trial yet (1 running)" in done.stderr and "nothing for this worker to run" in done.stderr
+
+    study.tell(study.trials[0].number, state=optuna.trial.TrialState.PRUNED)
+    done = zoo_train(tmp_path, *search)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert "error: no trial of the study 'shared' completed (1 pruned): no best trial" in done.stderr
