@@ -8,7 +8,8 @@
    evaluated on 20 missions with random fading (the paper's test setting).
 
 Seeds and branches run in parallel processes (one torch thread each). Writes ``<out>/learning.json`` (everything,
-incl. per-episode curves) and ``<out>/learning.csv`` (one row per seed and replay handling).
+incl. per-episode curves) and ``<out>/learning.csv`` (one row per seed and replay handling; with ``--phase1-only``
+one per seed), rewritten as each run finishes, so that an interruption (Ctrl-C) keeps the finished runs.
 
     python benchmarks/learning.py                      # 3 seeds, 500 + 150 episodes, 2 processes
     python benchmarks/learning.py --seeds 0 --phase1-episodes 20 --phase2-episodes 5 --eval-episodes 2  # smoke run
@@ -168,59 +169,104 @@ def run_phase2(seed: int, handling: str, args: argparse.Namespace, slot: int) ->
     }
 
 
-def main() -> None:
+def _positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (argparse names the option and the value when it raises)."""
+    value = int(text)
+    if value < 1:
+        raise ValueError(text)
+    return value
+
+
+def _json_object(text: str) -> dict[str, Any]:
+    """argparse type: a JSON object (DTDPG keyword arguments)."""
+    value = json.loads(text)
+    if not isinstance(value, dict):
+        raise ValueError(text)
+    return value
+
+
+def _parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="NomaRadioMap-v0")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--phase1-episodes", type=int, default=500, help="phase-1 episode budget (the bar's horizon)")
-    parser.add_argument("--phase2-episodes", type=int, default=150, help="phase-2 episodes per replay handling")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds (each runs once)")
+    parser.add_argument(
+        "--phase1-episodes", type=_positive_int, default=500, help="phase-1 episode budget (the bar's horizon)"
+    )
+    parser.add_argument("--phase2-episodes", type=_positive_int, default=150, help="phase-2 episodes per replay handling")
     parser.add_argument("--handlings", nargs="+", default=list(HANDLINGS), choices=HANDLINGS)
-    parser.add_argument("--eval-episodes", type=int, default=20, help="test missions with random fading")
-    parser.add_argument("--tail", type=int, default=30, help="phase-2 training episodes averaged at the end")
-    parser.add_argument("--hyperparams", type=json.loads, default={}, help="DTDPG kwargs as JSON, e.g. '{\"tau\": 0.005}'")
+    parser.add_argument("--eval-episodes", type=_positive_int, default=20, help="test missions with random fading")
+    parser.add_argument("--tail", type=_positive_int, default=30, help="phase-2 training episodes averaged at the end")
+    parser.add_argument(
+        "--hyperparams", type=_json_object, default={}, help="DTDPG kwargs as a JSON object, e.g. '{\"tau\": 0.005}'"
+    )
     parser.add_argument("--phase1-only", action="store_true", help="skip the phase-2 replay-handling comparison")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=_positive_int, default=2)
     parser.add_argument("--out", default="results/learning")
     args = parser.parse_args()
+    args.seeds = list(dict.fromkeys(args.seeds))  # a seed given twice would write one run folder from two processes
+    args.handlings = list(dict.fromkeys(args.handlings))
+    return args
+
+
+def main() -> None:
+    args = _parse_args()
     os.makedirs(args.out, exist_ok=True)
 
     phase1: dict[int, dict[str, Any]] = {}
     phase2: list[dict[str, Any]] = []
     started = time.perf_counter()
     # Phase-1 runs first; each seed's phase-2 branches start as soon as its phase 1 is done
+    from sb3_dtdpg.evaluation import format_ci
     from sb3_dtdpg.experiments.runs import worker_pool  # its workers end with this process
 
-    with worker_pool(args.workers) as pool:
-        jobs: dict[Future, tuple[str, int, str | None]] = {}
-        for i, seed in enumerate(args.seeds):
-            jobs[pool.submit(run_phase1, seed, args, i % args.workers)] = ("phase1", seed, None)
-        n_submitted = len(jobs)
-        while jobs:
-            done, _ = wait(jobs, return_when=FIRST_COMPLETED)
-            for future in done:
-                kind, seed, handling = jobs.pop(future)
-                result = future.result()
-                if kind == "phase1":
-                    phase1[seed] = result
-                    print(
-                        f"seed {seed}: phase 1 {'reached' if result['phase1_reached_95'] else 'did NOT reach'} 95 % "
-                        f"after {result['phase1_episodes']} episodes ({result['phase1_seconds']:.0f} s)",
-                        flush=True,
-                    )
-                    for h in [] if args.phase1_only else args.handlings:
-                        jobs[pool.submit(run_phase2, seed, h, args, n_submitted % args.workers)] = ("phase2", seed, h)
-                        n_submitted += 1
-                else:
-                    phase2.append(result)
-                    print(
-                        f"seed {seed} {handling}: eval MQI {result['eval_mqi']:.1f} +- {result['eval_mqi_ci']:.1f}, "
-                        f"success {result['eval_success_rate']:.2f} ({result['phase2_seconds']:.0f} s)",
-                        flush=True,
-                    )
+    try:
+        with worker_pool(args.workers) as pool:
+            jobs: dict[Future, tuple[str, int, str | None]] = {}
+            for i, seed in enumerate(args.seeds):
+                jobs[pool.submit(run_phase1, seed, args, i % args.workers)] = ("phase1", seed, None)
+            n_submitted = len(jobs)
+            while jobs:
+                done, _ = wait(jobs, return_when=FIRST_COMPLETED)
+                for future in done:
+                    kind, seed, handling = jobs.pop(future)
+                    result = future.result()
+                    if kind == "phase1":
+                        phase1[seed] = result
+                        _write_report(args, phase1, phase2, started, complete=False)
+                        print(
+                            f"seed {seed}: phase 1 {'reached' if result['phase1_reached_95'] else 'did NOT reach'} 95 % "
+                            f"after {result['phase1_episodes']} episodes ({result['phase1_seconds']:.0f} s)",
+                            flush=True,
+                        )
+                        for h in [] if args.phase1_only else args.handlings:
+                            jobs[pool.submit(run_phase2, seed, h, args, n_submitted % args.workers)] = ("phase2", seed, h)
+                            n_submitted += 1
+                    else:
+                        phase2.append(result)
+                        _write_report(args, phase1, phase2, started, complete=False)
+                        print(
+                            f"seed {seed} {handling}: eval MQI {format_ci(result['eval_mqi'], result['eval_mqi_ci'])}, "
+                            f"success {result['eval_success_rate']:.2f} ({result['phase2_seconds']:.0f} s)",
+                            flush=True,
+                        )
+    except KeyboardInterrupt:
+        _write_report(args, phase1, phase2, started, complete=False)
+        raise SystemExit(f"interrupted: the finished runs are in {args.out}/learning.json and learning.csv") from None
+    report = _write_report(args, phase1, phase2, started, complete=True)
+    _print_report(args, report)
 
-    reached = [seed for seed in args.seeds if phase1[seed]["phase1_reached_95"]]
+
+def _write_report(
+    args: argparse.Namespace, phase1: dict[int, dict[str, Any]], phase2: list[dict[str, Any]], started: float, complete: bool
+) -> dict[str, Any]:
+    """Write ``learning.json`` and ``learning.csv`` from the runs finished so far (rewritten after each run, so an
+    interruption keeps them); ``complete`` says whether every run has finished."""
+    seeds = [seed for seed in args.seeds if seed in phase1]
+    reached = [seed for seed in seeds if phase1[seed]["phase1_reached_95"]]
     bar_ok = len(reached) >= min(2, len(args.seeds))
     rows = []
+    if args.phase1_only:
+        rows = [{k: v for k, v in phase1[seed].items() if not k.endswith("_curve")} for seed in seeds]
     for r in sorted(phase2, key=lambda r: (r["seed"], HANDLINGS.index(r["replay_handling"]))):
         rows.append(
             {
@@ -233,6 +279,8 @@ def main() -> None:
     per_handling = {}
     for h in [] if args.phase1_only else args.handlings:
         sel = [r for r in phase2 if r["replay_handling"] == h]
+        if not sel:
+            continue
         per_handling[h] = {
             "eval_mqi_mean": float(np.mean([r["eval_mqi"] for r in sel])),
             "eval_success_mean": float(np.mean([r["eval_success_rate"] for r in sel])),
@@ -240,26 +288,37 @@ def main() -> None:
         }
     report = {
         "args": vars(args),
+        "complete": complete,
         "seconds": time.perf_counter() - started,
-        "phase1": [phase1[s] for s in args.seeds],
+        "phase1": [phase1[s] for s in seeds],
         "phase2": phase2,
         "bar_95_within_budget": {"seeds_reached": reached, "holds": bar_ok},
         "replay_handling": per_handling,
     }
     with open(os.path.join(args.out, "learning.json"), "w") as f:
         json.dump(report, f, indent=1)
-    if rows:
-        with open(os.path.join(args.out, "learning.csv"), "w", newline="") as f:
+    with open(os.path.join(args.out, "learning.csv"), "w", newline="") as f:  # an earlier run's rows never stay
+        if rows:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
+    return report
 
+
+def _print_report(args: argparse.Namespace, report: dict[str, Any]) -> None:
+    """Print the phase-1 bar and the phase-2 table of a finished benchmark."""
+    phase1 = {p["seed"]: p for p in report["phase1"]}
+    per_handling = report["replay_handling"]
     print(f"\nPhase 1 (>= 95 % success over 20 episodes within {args.phase1_episodes} episodes):")
     for seed in args.seeds:
         p = phase1[seed]
         status = f"reached after {p['phase1_episodes']} episodes" if p["phase1_reached_95"] else "not reached"
         print(f"  seed {seed}: {status} ({p['phase1_timesteps']} steps, {p['phase1_seconds']:.0f} s)")
-    print(f"  bar (>= 2 of 3 seeds): {'HOLDS' if bar_ok else 'FAILS'}")
+    bar = f">= {min(2, len(args.seeds))} of {len(args.seeds)} seeds"
+    print(f"  bar ({bar}): {'HOLDS' if report['bar_95_within_budget']['holds'] else 'FAILS'}")
+    if args.phase1_only:
+        print(f"\nwrote {args.out}/learning.json and learning.csv in {report['seconds']:.0f} s")
+        return
     print(f"\nPhase 2 ({args.phase2_episodes} episodes), final policy on {args.eval_episodes} rayleigh missions (seed mean):")
     print(f"  {'handling':<10}{'eval MQI':>10}{'eval success':>14}{'train MQI (tail)':>18}")
     for h, v in per_handling.items():

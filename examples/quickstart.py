@@ -14,6 +14,7 @@ paper's task, ``NomaRadioMapPaper-v0``. A small budget stays in the first phase.
 """
 
 import argparse
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -21,10 +22,10 @@ import torch as th
 
 import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)
 from sb3_dtdpg import DTDPG, MissionLoggerCallback, preset
-from sb3_dtdpg.evaluation import evaluate
+from sb3_dtdpg.evaluation import evaluate, format_ci
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--timesteps", type=int, default=5_000, help="training env steps")
     parser.add_argument("--env", default="NomaRadioMap-v0", help="a NomaRadioMap env id")
@@ -40,7 +41,10 @@ def main() -> None:
     parser.add_argument("--save-path", default="dtdpg_noma.zip", help="the saved model file")
     parser.add_argument("--tensorboard-log", default=None, help="TensorBoard folder (runs appear as DTDPG_<n>)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest for these small networks)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    for option in ("timesteps", "eval_episodes", "threads"):  # checked before training, not after it
+        if getattr(args, option) < 1:
+            parser.error(f"--{option.replace('_', '-')} must be >= 1, got {getattr(args, option)}")
     th.set_num_threads(args.threads)
 
     env_kwargs = {} if args.observation is None else {"observation": args.observation}
@@ -49,21 +53,22 @@ def main() -> None:
     model.learn(args.timesteps, callback=MissionLoggerCallback(), progress_bar=True)
     phase = model.phases[model.curriculum_state["phase_index"]].name
     print(f"trained {model.num_timesteps} steps, {model._episode_num} episodes; curriculum phase: {phase!r}")
+    model.save(args.save_path)
+    save_path = Path(args.save_path) if Path(args.save_path).suffix else Path(args.save_path).with_suffix(".zip")
 
     # The paper's test protocol: Rayleigh fading, episode i reset with seed + i (the same missions for every policy)
     result = evaluate(model, args.env, n_episodes=args.eval_episodes, seed=10_000, env_kwargs=env_kwargs)
     summary = result.summary()
     print(
         f"evaluation ({args.eval_episodes} Rayleigh episodes): success {100 * summary['success_rate']:.0f} %, "
-        f"MQI {summary['mqi']:.1f} ± {summary['mqi_ci']:.1f}, mission time {summary['mission_time']:.0f} steps"
+        f"MQI {format_ci(summary['mqi'], summary['mqi_ci'])}, mission time {summary['mission_time']:.0f} steps"
     )
 
-    model.save(args.save_path)
-    loaded = DTDPG.load(args.save_path, env=env)
+    loaded = DTDPG.load(save_path, env=env)
     obs, _ = gym.make(args.env, **env_kwargs).reset(seed=10_000)
     action, _ = loaded.predict(obs, deterministic=True)
     assert np.array_equal(action, model.predict(obs, deterministic=True)[0])
-    print(f"saved to {args.save_path}, loaded; first action of a mission: {np.round(action, 3)}")
+    print(f"saved to {save_path}, loaded; first action of a mission: {np.round(action, 3)}")
 
 
 if __name__ == "__main__":

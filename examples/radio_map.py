@@ -16,6 +16,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 from noma_radiomap import RadioMap, list_scenarios, load_scenario
+from sb3_dtdpg.common.files import safe_name
 
 
 def main(argv: list[str] | None = None) -> Path:
@@ -24,12 +25,17 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--out", default="results/maps", help="output folder (default: results/maps)")
     parser.add_argument("--dpi", type=int, default=120, help="resolution of the PNG (default: 120)")
     args = parser.parse_args(argv)
+    if args.dpi < 1:
+        parser.error(f"--dpi must be >= 1, got {args.dpi}")
+    try:
+        scenario = load_scenario(args.scenario)
+    except ValueError as error:  # names the scenario and the built-in ones
+        parser.error(f"--scenario: {error}")
 
-    scenario = load_scenario(args.scenario)
     radio_map = RadioMap.for_scenario(scenario)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / f"maps_{scenario.name}.png"
+    path = out / f"maps_{safe_name(scenario.name)}.png"  # the name is the YAML's text: never a path
     radio_map.plot_maps(str(path), dpi=args.dpi)
     print(
         f"{scenario.name}: {radio_map.nx} x {radio_map.ny} cells, outage share (one robot, full AP power) "
