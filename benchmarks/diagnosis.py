@@ -19,8 +19,12 @@ With ``--sooner-than CONFIG``: also, per configuration, how much sooner than ``C
 deterministic 95 % evaluation, in CPU time of the run (CONFIG's over the configuration's), and the mean over the
 seeds where both reached it.
 
-Runs are independent processes (one torch thread each), written to ``<out>/<config>_seed<k>.json`` as they finish;
-finished runs are skipped when the command is repeated, so an interrupted sweep resumes.
+Runs are independent processes (one torch thread each), written to ``<out>/<config>_seed<k>.json`` as they finish
+(beside the model, ``<config>_seed<k>.zip``, and ``<config>_seed<k>.log``, one line per evaluation as it happens,
+started afresh with each run); finished runs are skipped when the command is repeated, so an interrupted sweep
+resumes. A record stores the settings of its run (``--env``, ``--base``, ``--episodes``, ``--eval-every``,
+``--eval-missions``, ``--stop-at``), and a repeated command with other settings is refused before anything runs (use
+another ``--out``).
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from sb3_dtdpg.common.files import write_json
+from sb3_dtdpg.experiments.storage import reuse_error
 
 #: Changes to the base set-up. Keys: ``algo`` (dtdpg, ddpg, td3, sac), ``kwargs`` (algorithm kwargs merged into the
 #: base, ``policy_kwargs`` merged key by key), ``phase`` (fields of the phase-1 :class:`Phase`: the OU schedule),
@@ -183,6 +188,9 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     from sb3_dtdpg.baselines import TUNED_KWARGS
 
     th.set_num_threads(1)
+    log_path = run_path(args.out, name, seed, ".log")
+    # the run starts afresh (its record is not stored): an interrupted run's evaluations would read as this one's
+    open(log_path, "w").close()
     config = CONFIGS[name]
     # Without the goal features: positions, destinations, gains and arrived flags (the env's "destinations" layout).
     observation = "goal" if config.get("wrapper") == "relative_goal" else "destinations"
@@ -196,7 +204,13 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
         env = gym.make(args.env, **env_kwargs)
     base = copy.deepcopy(TUNED_KWARGS) if args.base == "tuned" else {}
     model = build_model(config, seed, base, args.episodes, env)
-    record: dict[str, Any] = {"config": name, "seed": seed, "train_success": [], "evals": []}
+    record: dict[str, Any] = {
+        "config": name,
+        "seed": seed,
+        "settings": run_settings(args),
+        "train_success": [],
+        "evals": [],
+    }
     # wall clock, and this process's CPU time (one torch thread: the wall clock of an undisturbed core)
     start, cpu_start = time.perf_counter(), time.process_time()
 
@@ -216,7 +230,7 @@ def run(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
                         cpu_seconds=time.process_time() - cpu_start,
                     )
                     record["evals"].append(result)
-                    with open(os.path.join(args.out, f"{name}_seed{seed}.log"), "a") as log:
+                    with open(log_path, "a") as log:
                         print(json.dumps({k: v for k, v in result.items() if k != "misses"}), file=log)
                     recent = [e["success"] for e in record["evals"][-2:]]
                     if len(recent) == 2 and min(recent) >= args.stop_at:
@@ -254,9 +268,33 @@ def figures(train_success: list[bool], evals: list[dict[str, Any]], window: int 
     return {"train95": train95, "eval95": eval95, "best_eval_success": best_eval, "episodes": len(s)}
 
 
+def run_path(out: str, name: str, seed: int, suffix: str = ".json") -> str:
+    """
+    A file of one run: ``<out>/<config>_seed<k><suffix>``.
+
+    :param out: the output folder
+    :param name: the configuration
+    :param seed: the run's seed
+    :param suffix: ``.json`` (the record) or ``.log`` (its evaluations as they happen)
+    :return: the file's path
+    """
+    return os.path.join(out, f"{name}_seed{seed}{suffix}")
+
+
+def run_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """
+    The options that determine a run's result, stored in its record and compared when the command is repeated.
+
+    :param args: the command's options
+    :return: per option (its ``argparse`` dest), its value as the JSON record gives it back
+    """
+    names = ["env", "base", "episodes", "eval_every", "eval_missions", "stop_at"]
+    return json.loads(json.dumps({name: getattr(args, name) for name in names}))
+
+
 def _record(out: str, name: str, seed: int) -> dict[str, Any] | None:
     """A finished run's record (None: not run)."""
-    path = os.path.join(out, f"{name}_seed{seed}.json")
+    path = run_path(out, name, seed)
     if not os.path.exists(path):
         return None
     with open(path) as f:
@@ -311,7 +349,15 @@ def sooner_rows(out: str, names: list[str], seeds: list[int], reference: str) ->
     return rows
 
 
-def main() -> None:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """
+    The command's options, checked before anything runs: counts, configuration names, the env id, and the runs
+    already stored in ``--out`` (each must have this command's settings, :func:`~sb3_dtdpg.experiments.storage.reuse_error`).
+
+    :param argv: the arguments (None: ``sys.argv``)
+    :return: the options, ``--configs`` and ``--seeds`` without repeats
+    :raises SystemExit: (code 2, one error line naming the option and its value) an option cannot be used
+    """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--configs", nargs="+", default=["base"], help="configurations to run (see --list)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
@@ -327,18 +373,48 @@ def main() -> None:
     parser.add_argument(
         "--sooner-than", metavar="CONFIG", help="also print how much sooner (CPU time) each config reached 95 %% than this one"
     )
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    if args.list:
+        return args
+    for option in ("episodes", "eval_every", "eval_missions", "workers"):
+        if getattr(args, option) < 1:
+            parser.error(f"--{option.replace('_', '-')} {getattr(args, option)}: must be at least 1")
+    if not np.isfinite(args.stop_at):
+        parser.error(f"--stop-at {args.stop_at}: expected a success rate")
+    unknown = sorted(set(args.configs) - set(CONFIGS) | ({args.sooner_than} - set(CONFIGS) - {None}))
+    if unknown:
+        parser.error(f"unknown configuration(s) {unknown}; known: {sorted(CONFIGS)}")
+    args.configs, args.seeds = list(dict.fromkeys(args.configs)), list(dict.fromkeys(args.seeds))
+    import gymnasium as gym
+
+    import noma_radiomap  # noqa: F401  (registers its env ids)
+
+    try:
+        gym.spec(args.env)
+    except gym.error.Error as error:
+        parser.error(f"--env {args.env}: {error}")
+    # --sooner-than's runs are read too: they must have been run with these settings as well
+    names = args.configs + ([args.sooner_than] if args.sooner_than not in (None, *args.configs) else [])
+    settings = run_settings(args)
+    error = reuse_error((run_path(args.out, name, seed), settings) for name in names for seed in args.seeds)
+    if error is not None:
+        parser.error(error)
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:
+    """
+    Run the configurations and seeds not yet stored in ``--out``, then print the summary.
+
+    :param argv: the arguments (None: ``sys.argv``)
+    """
+    args = parse_args(argv)
     if args.list:
         for name, config in CONFIGS.items():
             print(f"{name:16s} {config}")
         return
-    unknown = sorted(set(args.configs) - set(CONFIGS) | ({args.sooner_than} - set(CONFIGS) - {None}))
-    if unknown:
-        parser.error(f"unknown configuration(s) {unknown}; known: {sorted(CONFIGS)}")
     os.makedirs(args.out, exist_ok=True)
-    todo = [
-        (n, s) for n in args.configs for s in args.seeds if not os.path.exists(os.path.join(args.out, f"{n}_seed{s}.json"))
-    ]
+    todo = [(n, s) for n in args.configs for s in args.seeds if not os.path.exists(run_path(args.out, n, s))]
     print(f"{len(todo)} runs to do ({len(args.configs) * len(args.seeds) - len(todo)} already done) -> {args.out}")
     from sb3_dtdpg.experiments.runs import worker_pool  # its workers end with this process
 
@@ -349,7 +425,7 @@ def main() -> None:
             for future in done:
                 name, seed = jobs.pop(future)
                 record = future.result()
-                write_json(os.path.join(args.out, f"{name}_seed{seed}.json"), record)
+                write_json(run_path(args.out, name, seed), record)
                 evals = " ".join(f"{e['success']:.2f}" for e in record["evals"])
                 print(
                     f"{time.strftime('%H:%M:%S')} {name} seed {seed}: train95 {record['train95']} eval95 {record['eval95']} "

@@ -17,9 +17,14 @@ destinations, gains, arrived flags, and each robot's direction and distance to i
     python benchmarks/targets.py --methods dtdpg ddpg --seeds 0 1 2 3 4 --observation goal
     python benchmarks/targets.py --methods dtdpg --seeds 0 --episodes 30 --eval-episodes 2   # smoke run
 
-Runs are independent processes (one torch thread each); each writes ``<out>/<method>_<observation>_seed<k>.json``
-when it finishes, and finished runs are skipped when the command is repeated. The summary (per seed, and the
-paired DT-DPG - DDPG differences with a 95 % t-interval over seeds) is printed and written to ``<out>/summary.md``.
+Runs are independent processes (one torch thread each); each writes its record when it finishes, to
+``<out>/<method>_<observation>[_<tag>][_<transfer>]_seed<k>.json`` (``<transfer>``: DT-DPG's runs only, when the
+transfer rule is not the default, e.g. ``threshold0.9``, ``no-early-transfer``, ``phase1-max100``). Finished runs are
+skipped when the command is repeated; a record stores the settings of its run (``--env``, ``--env-kwargs``,
+``--observation``, ``--hyperparams``, ``--algo-kwargs``, ``--episodes``, ``--eval-episodes`` and DT-DPG's transfer
+rule), and a repeated command with other settings is refused before anything runs (use another ``--out``). The summary
+(per seed, and the paired DT-DPG - DDPG differences with a 95 % t-interval over seeds) is printed and written to
+``<out>/summary_<observation>[_<tag>][_<transfer>].md``.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from sb3_dtdpg.common.files import write_json
+from sb3_dtdpg.experiments.storage import reuse_error
 
 
 def _make_env(env_id: str, layout: str, **kwargs: Any) -> Any:
@@ -70,6 +76,7 @@ def run(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
         "observation": args.observation,
         "transfer": transfer_name(args) if method == "dtdpg" else None,
         "algo_kwargs": args.algo_kwargs,
+        "settings": run_settings(method, args),
         "success": [],
         "mqi": [],
     }
@@ -112,6 +119,35 @@ def transfer_name(args: argparse.Namespace) -> str:
     return "_".join(parts)
 
 
+def run_path(args: argparse.Namespace, method: str, seed: int) -> str:
+    """
+    The record file of one run: ``<out>/<method>_<observation>[_<tag>][_<transfer>]_seed<k>.json``.
+
+    :param args: the command's options
+    :param method: ``"dtdpg"`` or ``"ddpg"``
+    :param seed: the run's seed
+    :return: the file's path
+    """
+    tag = f"_{args.tag}" if args.tag else ""
+    transfer = transfer_name(args) if method == "dtdpg" else ""
+    variant = f"_{transfer}" if transfer else ""
+    return os.path.join(args.out, f"{method}_{args.observation}{tag}{variant}_seed{seed}.json")
+
+
+def run_settings(method: str, args: argparse.Namespace) -> dict[str, Any]:
+    """
+    The options that determine a run's result, stored in its record and compared when the command is repeated.
+
+    :param method: ``"dtdpg"`` or ``"ddpg"`` (only DT-DPG's runs depend on the transfer rule)
+    :param args: the command's options
+    :return: per option (its ``argparse`` dest), its value as the JSON record gives it back
+    """
+    names = ["env", "env_kwargs", "observation", "hyperparams", "algo_kwargs", "episodes", "eval_episodes"]
+    if method == "dtdpg":
+        names += ["success_threshold", "destination_episodes"]
+    return json.loads(json.dumps({name: getattr(args, name) for name in names}))
+
+
 def planner_mqi(args: argparse.Namespace) -> dict[str, Any]:
     """The comm-aware planner on the same test missions."""
     from noma_radiomap.planners import CommAwarePlanner
@@ -131,8 +167,15 @@ def _t_interval(values: list[float]) -> tuple[float, float]:
     return float(x.mean()), float(stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)))
 
 
+def _half(half: float, spec: str) -> str:
+    """A CI half-width in ``spec``'s format; ``n/a`` when it is undefined (one seed), as ``format_ci`` writes it."""
+    return format(half, spec) if np.isfinite(half) else "n/a"
+
+
 def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argparse.Namespace) -> list[str]:
     """Markdown lines: one row per method and seed, the means, and the paired DT-DPG - DDPG differences."""
+    from sb3_dtdpg.evaluation import format_ci
+
     rule = f" to {args.success_threshold:.0%}" if args.success_threshold else ""
     lines = [
         f"Test: {args.eval_episodes} Rayleigh missions; comm-aware planner {planner['test_mqi']:.1f} MQI, "
@@ -156,14 +199,14 @@ def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argp
             phase1 = f"{ended} ({r['phase1_episodes']} ep., last 20 at {r['phase1_rate_at_transfer']:.0%})"
         lines.append(
             f"| {r['method']} | {r['seed']} | {phase1} | {r['test_success']:.0%} "
-            f"| {r['test_mqi']:.1f} ± {r['test_mqi_ci']:.1f} | {r['test_mqi'] / planner['test_mqi']:.3f} "
+            f"| {format_ci(r['test_mqi'], r['test_mqi_ci'])} | {r['test_mqi'] / planner['test_mqi']:.3f} "
             f"| {r['seconds']:.0f} |"
         )
     for method, runs in by_method.items():
         success, ci_s = _t_interval([r["test_success"] for r in runs.values()])
         mqi, ci_m = _t_interval([r["test_mqi"] for r in runs.values()])
         lines.append(
-            f"| **{method} mean** | {len(runs)} seeds | | {success:.0%} ± {ci_s:.0%} | {mqi:.1f} ± {ci_m:.1f} "
+            f"| **{method} mean** | {len(runs)} seeds | | {success:.0%} ± {_half(ci_s, '.0%')} | {format_ci(mqi, ci_m)} "
             f"| {mqi / planner['test_mqi']:.3f} | |"
         )
     if "dtdpg" in by_method and "ddpg" in by_method:
@@ -175,12 +218,25 @@ def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argp
             lines += [
                 "",
                 f"Paired DT-DPG - DDPG over {len(seeds)} seeds (mean ± 95 % t-interval): success {ms * 100:+.0f} ± "
-                f"{cs * 100:.0f} points, MQI {mm:+.1f} ± {cm:.1f}.",
+                f"{_half(cs * 100, '.0f')} points, MQI {mm:+.1f} ± {_half(cm, '.1f')}.",
             ]
     return lines
 
 
-def main() -> None:
+def _unique(values: list[Any]) -> list[Any]:
+    """``values`` without repeats, in their order (``--seeds 0 0`` runs seed 0 once)."""
+    return list(dict.fromkeys(values))
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """
+    The command's options, checked before anything runs: counts, JSON objects, the env id, and the runs already
+    stored in ``--out`` (each must have this command's settings, :func:`~sb3_dtdpg.experiments.storage.reuse_error`).
+
+    :param argv: the arguments (None: ``sys.argv``)
+    :return: the options, ``--methods`` and ``--seeds`` without repeats
+    :raises SystemExit: (code 2, one error line naming the option and its value) an option cannot be used
+    """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--methods", nargs="+", default=["dtdpg", "ddpg"], choices=["dtdpg", "ddpg"])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
@@ -208,22 +264,45 @@ def main() -> None:
     parser.add_argument("--tag", default="", help="the name of an --algo-kwargs variant (in its file names)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="results/targets")
-    args = parser.parse_args()
-    if not isinstance(args.algo_kwargs, dict):
-        parser.error(f"--algo-kwargs: expected a JSON object, got {args.algo_kwargs!r}")
+    args = parser.parse_args(argv)
+    for option in ("episodes", "eval_episodes", "workers"):
+        if getattr(args, option) < 1:
+            parser.error(f"--{option.replace('_', '-')} {getattr(args, option)}: must be at least 1")
+    if args.destination_episodes < 0:
+        parser.error(f"--destination-episodes {args.destination_episodes}: must be at least 0 (0: no cap)")
+    if not 0 <= args.success_threshold <= 1:
+        parser.error(f"--success-threshold {args.success_threshold}: must be in [0, 1] (0: no early transfer)")
+    for option in ("env_kwargs", "algo_kwargs"):
+        if not isinstance(getattr(args, option), dict):
+            parser.error(f"--{option.replace('_', '-')}: expected a JSON object, got {getattr(args, option)!r}")
     if args.algo_kwargs and not args.tag:
         parser.error(f"--algo-kwargs {json.dumps(args.algo_kwargs)}: name the variant with --tag (its result files)")
+    args.methods, args.seeds = _unique(args.methods), _unique(args.seeds)
+    import gymnasium as gym
+
+    import noma_radiomap  # noqa: F401  (registers its env ids)
+
+    try:
+        gym.spec(args.env)
+    except gym.error.Error as error:
+        parser.error(f"--env {args.env}: {error}")
+    error = reuse_error((run_path(args, m, s), run_settings(m, args)) for m in args.methods for s in args.seeds)
+    if error is not None:
+        parser.error(error)
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:
+    """
+    Train and test the runs not yet stored in ``--out``, then print and write the summary.
+
+    :param argv: the arguments (None: ``sys.argv``)
+    """
+    args = parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
-
     transfer = transfer_name(args)
-    variant = f"_{transfer}" if transfer else ""
-    tag = f"_{args.tag}" if args.tag else ""
-
-    def path(method: str, seed: int) -> str:
-        name = f"{method}_{args.observation}{tag}{variant if method == 'dtdpg' else ''}_seed{seed}.json"
-        return os.path.join(args.out, name)
-
-    todo = [(m, s) for m in args.methods for s in args.seeds if not os.path.exists(path(m, s))]
+    suffix = (f"_{args.tag}" if args.tag else "") + (f"_{transfer}" if transfer else "")
+    todo = [(m, s) for m in args.methods for s in args.seeds if not os.path.exists(run_path(args, m, s))]
     print(f"{len(todo)} runs to do -> {args.out}", flush=True)
     from sb3_dtdpg.experiments.runs import worker_pool  # its workers end with this process
 
@@ -235,7 +314,7 @@ def main() -> None:
             for future in done:
                 method, seed = jobs.pop(future)
                 record = future.result()
-                write_json(path(method, seed), record)
+                write_json(run_path(args, method, seed), record)
                 print(
                     f"{time.strftime('%H:%M:%S')} {method} seed {seed}: test success {record['test_success']:.0%}, "
                     f"MQI {record['test_mqi']:.1f} ({record['seconds']:.0f} s"
@@ -247,11 +326,11 @@ def main() -> None:
     records = []
     for m in args.methods:
         for s in args.seeds:
-            if os.path.exists(path(m, s)):
-                with open(path(m, s)) as f:
+            if os.path.exists(run_path(args, m, s)):
+                with open(run_path(args, m, s)) as f:
                     records.append(json.load(f))
     lines = summarize(records, planner, args)
-    with open(os.path.join(args.out, f"summary_{args.observation}{tag}{variant}.md"), "w") as f:
+    with open(os.path.join(args.out, f"summary_{args.observation}{suffix}.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -13,7 +13,7 @@ import contextlib
 import json
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -466,3 +466,56 @@ def clear_checkpoints(run_dir: Path) -> None:
     (run_dir / "progress.json").unlink(missing_ok=True)
     (run_dir / TRAINED_RECORD).unlink(missing_ok=True)
     shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)
+
+
+def _as_option(key: str, value: Any) -> str:
+    """An option and its value as typed on the command line (``--env-kwargs '{"scenario": "small"}'``)."""
+    if value is None:
+        return f"--{key.replace('_', '-')} (not stored)"
+    shown = f"'{json.dumps(value)}'" if isinstance(value, dict | list) else str(value)
+    return f"--{key.replace('_', '-')} {shown}"
+
+
+def settings_mismatch(path: str | Path, settings: dict[str, Any]) -> str | None:
+    """
+    Why the record a benchmark script stored at ``path`` cannot stand for a run with ``settings``: the scripts name
+    their record files by a few options only and store the others under the record's ``"settings"``.
+
+    :param path: the run's record file (JSON)
+    :param settings: this command's settings of the run, per option (its ``argparse`` dest), as JSON gives them back
+    :return: the reason, naming each option that differs with both values (or that the record cannot be checked);
+        None when no record is stored or it has these settings
+    """
+    if not os.path.exists(path):
+        return None
+    try:
+        with open(path) as f:
+            record = json.load(f)
+    except (OSError, ValueError) as error:
+        return f"{path} cannot be read ({error}), so its settings cannot be checked"
+    stored = record.get("settings") if isinstance(record, dict) else None
+    if not isinstance(stored, dict):
+        return f"{path} was stored by an older version of this script, without its settings, so they cannot be checked"
+    differ = [key for key in [*settings, *(k for k in stored if k not in settings)] if stored.get(key) != settings.get(key)]
+    if not differ:
+        return None
+    old = ", ".join(_as_option(key, stored.get(key)) for key in differ)
+    new = ", ".join(_as_option(key, settings.get(key)) for key in differ)
+    return f"{path} was run with {old}; this command asks for {new}"
+
+
+def reuse_error(runs: Iterable[tuple[str | Path, dict[str, Any]]]) -> str | None:
+    """
+    :param runs: each run's record file and this command's settings of it (:func:`settings_mismatch`)
+    :return: the error of a command that would reuse stored runs of other settings: the first one's reason, how many
+        there are, and what to do; None when every stored run can be reused
+    """
+    reasons = [reason for reason in (settings_mismatch(path, settings) for path, settings in runs) if reason is not None]
+    if not reasons:
+        return None
+    if len(reasons) == 1:
+        return f"{reasons[0]}: use another --out, or delete the file to run it again"
+    return (
+        f"{reasons[0]} ({len(reasons)} stored runs cannot be reused): use another --out, or delete those files to run "
+        "them again"
+    )
