@@ -63,6 +63,8 @@ COLUMNS = (
     "power_used",
     "outage_full_power",
 )
+#: The columns a ``--csv`` of this script has (one of an earlier version lacks the power columns)
+CSV_COLUMNS = ("policy", "mode", "run", "episode", *COLUMNS[:6])
 
 
 class PowerRecorder(gym.Wrapper):
@@ -207,28 +209,31 @@ def plot(frames: dict[str, pd.DataFrame], path: Path) -> None:
     figure = Figure(figsize=(3.2 + 1.6 * len(frames) * len(modes), 4.6), layout="constrained")
     axes = figure.subplots(1, len(modes), squeeze=False)[0]
     for ax, mode in zip(axes, modes, strict=True):
-        x, ticks, names, low = 0.0, [], [], np.inf
+        planners = next(iter(summaries.values()))
+        planners = planners[planners["mode"] == mode].set_index("policy")
+        lines = [planners.loc[name, "mqi"] for name in ("best planner", "shortest-path planner")]
+        x, ticks, names, low, top = 0.0, [], [], min(lines), max(lines)
         for label, summary in summaries.items():
             learners = summary[(summary["mode"] == mode) & ~summary["policy"].isin(list(PLANNERS))]
             for _, row in learners.iterrows():
                 color = colors.get(row.policy, "tab:gray")
-                ax.bar(x, row.mqi, yerr=row.mqi_ci, color=color, capsize=3)
+                # One seed (compare's default) has no CI: the bar without an error bar
+                ci = row.mqi_ci if np.isfinite(row.mqi_ci) else 0.0
+                ax.bar(x, row.mqi, yerr=ci if ci > 0 else None, color=color, capsize=3)
                 ax.bar(x, row.power_loss, bottom=row.mqi, color=color, alpha=0.3, hatch="//", edgecolor=color)
                 ticks.append(x)
                 names.append(f"{row.policy}\n{label}")
-                low = min(low, row.mqi - row.mqi_ci)
+                low, top = min(low, row.mqi - ci), max(top, row.mqi + max(ci, row.power_loss))
                 x += 1.0
             x += 0.5
-        planners = next(iter(summaries.values()))
-        planners = planners[planners["mode"] == mode].set_index("policy")
         for name, style in (("best planner", "-"), ("shortest-path planner", "--")):
             ax.axhline(planners.loc[name, "mqi"], color="black", linestyle=style, linewidth=1, label=name)
-        top = planners.loc["best planner", "mqi"]
-        ax.set_ylim(low - 0.15 * (top - low), top + 0.1 * (top - low))
+        margin = max(top - low, 1.0)  # every bar and line at one value: still a range
+        ax.set_ylim(low - 0.15 * margin, top + 0.1 * margin)
         ax.set_xticks(ticks, names, fontsize=8)
         ax.set_title(f"{mode.upper()}, radio-map channel")
     axes[0].set_ylabel("MQI on the test missions")
-    axes[0].bar(np.nan, np.nan, color="gray", label="MQI with its own power split (95 % CI over seeds)")
+    axes[0].bar(np.nan, np.nan, color="gray", label="MQI with its own power split (95 % CI over seeds, if several)")
     axes[0].bar(np.nan, np.nan, color="gray", alpha=0.3, hatch="//", label="lost to its split (top: its path's worth)")
     figure.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=2, fontsize=8)
     figure.savefig(path, dpi=120)
@@ -238,32 +243,109 @@ def _format(value: float, ci: float) -> str:
     return f"{value:.1f}" if not np.isfinite(ci) or ci == 0 else f"{value:.1f} ± {ci:.1f}"
 
 
+def csv_labels(paths: list[Path], labels: list[str] | None = None) -> list[str]:
+    """
+    :param paths: the ``--from-csv`` files
+    :param labels: their ``--labels`` (None: the file names, with their folders where two share a name)
+    :return: one label per file, no two alike
+    :raises ValueError: a file given twice, a number of labels other than of files, or a label given twice
+    """
+    seen: dict[Path, Path] = {}
+    for path in paths:
+        if seen.setdefault(path.resolve(), path) is not path:
+            raise ValueError(f"--from-csv: {path} given twice")
+    if labels is None:  # the file names, with as many of their folders as tell them apart
+        labels = [path.stem for path in paths]
+        depth = 1
+        while len(set(labels)) < len(labels) and depth < max(len(path.parts) for path in paths):
+            depth += 1
+            labels = ["/".join(path.with_suffix("").parts[-depth:]) for path in paths]
+    elif len(labels) != len(paths):
+        raise ValueError(f"--labels: {len(labels)} labels for {len(paths)} --from-csv files")
+    repeated = sorted({label for label in labels if labels.count(label) > 1})
+    if repeated:
+        raise ValueError(f"--labels: {', '.join(map(repr, repeated))} given twice; give each --from-csv file its own label")
+    return labels
+
+
+def read_missions(path: Path) -> pd.DataFrame:
+    """
+    :param path: a ``--csv`` of this script
+    :return: its missions
+    :raises ValueError: naming the file when it is no CSV or lacks columns of one
+    """
+    try:
+        missions = pd.read_csv(path)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
+        raise ValueError(f"--from-csv {path}: cannot read it as a CSV ({error})") from error
+    missing = [column for column in CSV_COLUMNS if column not in missions]
+    if missing:
+        raise ValueError(f"--from-csv {path}: no column {', '.join(missing)} (give a --csv of this script)")
+    return missions
+
+
+def _count(text: str) -> int:
+    """:return: a number of test missions, at least 1"""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a number of test missions (a count from 1), got {text!r}")
+    return value
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", type=Path, nargs="?", help="output folder of compare or reproduce (its runs/*/model.zip)")
-    parser.add_argument("--episodes", type=int, default=20, help="test missions (default: 20, as compare)")
-    parser.add_argument("--seed", type=int, default=10_000, help="reset seed of test mission 0 (default: 10000)")
+    # None where not given: they measure an output folder, and --from-csv refuses them
+    parser.add_argument("--episodes", type=_count, default=None, help="test missions (default: 20, as compare)")
+    parser.add_argument("--seed", type=int, default=None, help="reset seed of test mission 0 (default: 10000)")
     parser.add_argument(
-        "--runs", default="*", help="only the run folders matching this glob pattern, e.g. '*_radio_map_500_tuned_goal'"
+        "--runs", default=None, help="only the run folders matching this glob pattern, e.g. '*_radio_map_500_tuned_goal'"
     )
-    parser.add_argument("--csv", type=Path, default=None, help="write one row per policy and mission here")
+    parser.add_argument("--csv", type=Path, default=None, help="write one row per policy and mission here (with out)")
     parser.add_argument("--figure", type=Path, default=None, help="draw the split here (.png)")
     parser.add_argument("--from-csv", type=Path, nargs="+", default=None, help="CSVs of earlier runs of --csv, instead of out")
-    parser.add_argument("--labels", nargs="+", default=None, help="a label per --from-csv file (default: its name)")
+    parser.add_argument(
+        "--labels",
+        nargs="+",
+        default=None,
+        help="a label per --from-csv file, no two alike (default: its name, with its folders where two share one)",
+    )
     args = parser.parse_args()
     if args.from_csv:
-        labels = args.labels or [path.stem for path in args.from_csv]
-        if len(labels) != len(args.from_csv):
-            parser.error(f"--labels: {len(labels)} labels for {len(args.from_csv)} --from-csv files")
-        frames = {label: pd.read_csv(path) for label, path in zip(labels, args.from_csv, strict=True)}
-    elif args.out is not None:
-        frames = {args.out.name: measure(args.out, args.episodes, args.seed, args.runs)}
-    else:
+        if args.out is not None:
+            parser.error(f"give an output folder ({args.out}) or --from-csv, not both")
+        measuring = [f"--{name}" for name in ("episodes", "seed", "runs", "csv") if getattr(args, name) is not None]
+        if measuring:
+            parser.error(
+                f"{', '.join(measuring)}: only when measuring an output folder; --from-csv reads missions measured before"
+            )
+    elif args.out is None:
         parser.error("give an output folder of compare or reproduce, or --from-csv")
+    elif args.labels is not None:
+        parser.error("--labels: only with --from-csv (the label of an output folder is its name)")
+    for option, path in (("--csv", args.csv), ("--figure", args.figure)):
+        if path is not None:  # a folder that cannot be made fails now, not after the measurement
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as error:
+                parser.error(f"{option} {path}: {error}")
+    if args.from_csv:
+        try:
+            labels = csv_labels(args.from_csv, args.labels)
+            frames = {label: read_missions(path) for label, path in zip(labels, args.from_csv, strict=True)}
+        except ValueError as error:
+            parser.error(str(error))
+    else:
+        episodes = 20 if args.episodes is None else args.episodes
+        seed = 10_000 if args.seed is None else args.seed
+        frames = {args.out.name: measure(args.out, episodes, seed, "*" if args.runs is None else args.runs)}
     for label, missions in frames.items():
         _print_summary(label, missions)
-    if args.csv is not None and args.out is not None:
-        next(iter(frames.values())).to_csv(args.csv, index=False)
+    if args.csv is not None:
+        frames[args.out.name].to_csv(args.csv, index=False)
         print(f"wrote {args.csv}")
     if args.figure is not None:
         plot(frames, args.figure)

@@ -24,8 +24,72 @@ from pathlib import Path
 
 import pandas as pd
 
-from sb3_dtdpg.experiments.budgets import get_budget
-from sb3_dtdpg.experiments.paper_task import merge_runs, write_tables
+from sb3_dtdpg.experiments.budgets import PUBLIC_BUDGETS, Budget, get_budget
+from sb3_dtdpg.experiments.paper_task import merge_runs, table_name, write_tables
+
+#: The columns of ``paper_task_runs.csv`` that the merge and the tables read
+REQUIRED_COLUMNS = (
+    "group",
+    "preset",
+    "algorithm",
+    "multiple_access",
+    "training",
+    "episodes",
+    "seed",
+    "success_rate",
+    "mqi",
+    "train_success",
+    "train_success_first",
+    "train_success_last",
+)
+
+
+def read_runs(path: Path) -> pd.DataFrame:
+    """
+    :param path: a ``paper_task_runs.csv`` or ``paper_task_reality_runs.csv`` of ``reproduce``
+    :return: its per-run records
+    :raises ValueError: naming the file when it is no CSV or lacks columns of those files
+    """
+    try:
+        records = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
+        raise ValueError(f"{path}: not a CSV file ({error})") from error
+    missing = [column for column in REQUIRED_COLUMNS if column not in records]
+    if missing:
+        raise ValueError(
+            f"{path}: no column {', '.join(missing)} (give the paper_task_runs.csv or paper_task_reality_runs.csv "
+            "of a reproduce folder)"
+        )
+    return records
+
+
+def task_episodes(budget: Budget, channel: str) -> int:
+    """
+    :param budget: a budget
+    :param channel: the training channel
+    :return: the training episodes of the budget's paper-task runs on that channel (as
+        :func:`sb3_dtdpg.experiments.paper_task.paper_task_specs` sets them)
+    """
+    return budget.task_episodes if channel == "radio_map" else budget.task_long_episodes
+
+
+def check_budget_episodes(name: str, records: pd.DataFrame, channel: str) -> None:
+    """
+    :param name: the ``--budget`` given
+    :param records: the merged runs, all trained on ``channel``
+    :param channel: their training channel
+    :raises ValueError: naming the budget, its episodes and the runs' episodes when they differ
+    """
+    budget = get_budget(name)
+    expected = task_episodes(budget, channel)
+    episodes = sorted(int(value) for value in records["episodes"].unique())
+    if episodes != [expected]:
+        matching = [other for other in PUBLIC_BUDGETS if [task_episodes(get_budget(other), channel)] == episodes]
+        hint = f"give --budget {' or '.join(matching)}" if matching else "no budget trains that many; merge runs of one budget"
+        raise ValueError(
+            f"--budget {name}: {expected} training episodes per {channel} run, but the runs trained "
+            f"{', '.join(map(str, episodes))} ({hint})"
+        )
 
 
 def main() -> None:
@@ -33,26 +97,33 @@ def main() -> None:
     parser.add_argument(
         "runs", type=Path, nargs="+", help="paper_task_runs.csv or paper_task_reality_runs.csv files of reproduce"
     )
-    parser.add_argument("--out", type=Path, required=True, help="folder for the merged tables")
+    parser.add_argument("--out", type=Path, required=True, help="folder for the merged tables (not an input's folder)")
     parser.add_argument("--budget", default="paper", help="the runs' budget (default: paper)")
     args = parser.parse_args()
     try:
         budget = get_budget(args.budget)
     except ValueError as error:
-        parser.error(str(error))
+        parser.error(f"--budget: {error}")
     for path in args.runs:
         if not path.is_file():
             parser.error(f"{path}: no such file (give the paper_task_runs.csv of a reproduce folder)")
+        # The merged tables have the names of the inputs' (paper_task_runs.csv, paper_task.md): they would replace them
+        if args.out.resolve() == path.parent.resolve():
+            parser.error(f"--out {args.out}: the folder of the input {path}; the merged tables would overwrite its tables")
     try:
-        records = merge_runs([pd.read_csv(path) for path in args.runs])
+        records = merge_runs([read_runs(path) for path in args.runs])
     except ValueError as error:
         parser.error(str(error))
     channels = sorted(records["training"].unique())
     if len(channels) != 1:
         parser.error(f"the runs were trained on several channels ({', '.join(channels)}): merge each channel's files alone")
+    try:
+        check_budget_episodes(args.budget, records, channels[0])
+    except ValueError as error:
+        parser.error(str(error))
     args.out.mkdir(parents=True, exist_ok=True)
     write_tables(args.out, budget, records, channel=channels[0])
-    print(f"\n{len(records)} runs from {len(args.runs)} files; tables in {args.out}")
+    print(f"\n{len(records)} runs from {len(args.runs)} files; tables {table_name(channels[0])}* in {args.out}")
 
 
 if __name__ == "__main__":

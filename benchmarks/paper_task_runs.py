@@ -12,29 +12,68 @@ Table I preset with a single value changed on the paper's task::
 Training success is the share of training episodes in which every robot reached its destination (all episodes,
 the first 100, the last 100; :func:`sb3_dtdpg.experiments.paper_task.training_success` on the run's TensorBoard
 folder); the test columns are the run's 20 Rayleigh test missions. Below the per-run table: mean and 95 % CI
-per configuration (t-interval over seeds) and DT-DPG - DDPG paired by seed.
+per configuration (t-interval over seeds) and DT-DPG - DDPG paired by seed. A configuration is every setting of
+a run but its algorithm and seed (:data:`CONFIGURATION_FIELDS`: preset, overrides, learning rate, env, scenario,
+channel, training episodes, ...); the tables show those that differ between the runs, the others are printed once.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import math
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
-from sb3_dtdpg.evaluation import mean_ci
+from sb3_dtdpg.evaluation import format_ci, mean_ci
 from sb3_dtdpg.experiments.paper_task import training_success
+from sb3_dtdpg.experiments.specs import RunSpec
 from sb3_dtdpg.experiments.tables import paired_differences
 
 METRICS = ("train_success", "train_success_first100", "train_success_last100", "test_success", "test_mqi")
-CONFIGURATION = ["preset", "overrides", "multiple_access"]
+#: The columns that make a configuration, whose runs differ only in algorithm and seed: column -> the RunSpec field
+#: it holds (``sb3-dtdpg train --hyperparams learning_rate:...`` sets ``learning_rate``, not ``overrides``). Every
+#: field that changes a run's result is one; ``episodes`` is the number of training episodes logged.
+CONFIGURATION_FIELDS = {
+    "preset": "hyperparams",
+    "overrides": "overrides",
+    "learning_rate": "learning_rate",
+    "multiple_access": "multiple_access",
+    "env_id": "env_id",
+    "scenario": "scenario",
+    "channel": "channel",
+    "budget_episodes": "episodes",
+    "timesteps": "timesteps",
+    "observation": "observation",
+    "power_mapping": "power_mapping",
+    "inducing": "inducing",
+    "destination_episodes": "destination_episodes",
+    "tag": "tag",
+    "eval_episodes": "eval_episodes",
+    "eval_seed": "eval_seed",
+    "eval_channel": "eval_channel",
+}
+CONFIGURATION = list(CONFIGURATION_FIELDS)
+#: The configuration columns shown even when every run has the same value
+ALWAYS_SHOWN = ["preset", "overrides", "multiple_access"]
+_DEFAULTS = {field.name: field.default for field in dataclasses.fields(RunSpec)}
+
+
+def _spec_value(spec: dict[str, Any], field: str) -> Any:
+    """:return: a field of a stored run spec, RunSpec's default where a result of an earlier version lacks it"""
+    value = spec.get(field, _DEFAULTS.get(field))
+    if field == "overrides":
+        return " ".join(f"{name}:{text}" for name, text in value or [])
+    return None if value is dataclasses.MISSING else value
 
 
 def run_rows(out: Path) -> pd.DataFrame:
     """
     :param out: an output folder of ``sb3-dtdpg train`` (``runs/<run id>/result.json``, ``tb/<run id>/``)
-    :return: one row per finished run, sorted by overrides, algorithm and seed
+    :return: one row per finished run, sorted by configuration (:data:`CONFIGURATION`), algorithm and seed
     """
     rows = []
     for result_file in sorted((out / "runs").glob("*/result.json")):
@@ -46,9 +85,7 @@ def run_rows(out: Path) -> pd.DataFrame:
             {
                 "run_id": run_id,
                 "algo": spec["algo"],
-                "preset": spec["hyperparams"],
-                "overrides": " ".join(f"{name}:{value}" for name, value in spec.get("overrides") or []),
-                "multiple_access": spec["multiple_access"],
+                **{column: _spec_value(spec, field) for column, field in CONFIGURATION_FIELDS.items()},
                 "seed": spec["seed"],
                 "episodes": n_episodes,
                 "train_success": every,
@@ -60,7 +97,10 @@ def run_rows(out: Path) -> pd.DataFrame:
             }
         )
     frame = pd.DataFrame(rows)
-    return frame.sort_values(["overrides", "algo", "seed"], ascending=[True, False, True]) if rows else frame
+    if not rows:
+        return frame
+    order = [*CONFIGURATION, "algo", "seed"]
+    return frame.sort_values(order, ascending=[column != "algo" for column in order], kind="stable")
 
 
 def summary_rows(frame: pd.DataFrame) -> pd.DataFrame:
@@ -69,7 +109,7 @@ def summary_rows(frame: pd.DataFrame) -> pd.DataFrame:
     :return: per configuration and algorithm: ``n`` (seeds) and ``<metric> ± <95 % CI>`` text per metric
     """
     rows = []
-    for key, group in frame.groupby([*CONFIGURATION, "algo"], sort=False):
+    for key, group in frame.groupby([*CONFIGURATION, "algo"], sort=False, dropna=False):
         row = dict(zip([*CONFIGURATION, "algo"], key, strict=True))
         row["n"] = len(group)
         for metric in METRICS:
@@ -84,6 +124,8 @@ def paired_rows(frame: pd.DataFrame) -> pd.DataFrame:
     :return: DT-DPG - DDPG per configuration on the seeds both have: ``n`` (pairs) and ``<difference> ± <95 % CI>``
     """
     differences = paired_differences(frame, "algo", "dtdpg", "ddpg", by=CONFIGURATION, metrics=METRICS)
+    if differences.empty:
+        return pd.DataFrame(columns=[*CONFIGURATION, "contrast", "n", *METRICS])
     for metric in METRICS:
         differences[metric] = [
             _with_ci(value, half, metric) for value, half in zip(differences[metric], differences[f"{metric}_ci"], strict=True)
@@ -91,9 +133,26 @@ def paired_rows(frame: pd.DataFrame) -> pd.DataFrame:
     return differences[[*CONFIGURATION, "contrast", "n", *METRICS]]
 
 
+def shown_configuration(frame: pd.DataFrame) -> tuple[list[str], dict[str, str]]:
+    """
+    :param frame: output of :func:`run_rows`
+    :return: the configuration columns to show (:data:`ALWAYS_SHOWN` and those that differ between runs) and the
+        value of each other one, the same in every run
+    """
+    shown = [column for column in CONFIGURATION if column in ALWAYS_SHOWN or frame[column].map(_text).nunique() > 1]
+    common = {column: _text(frame[column].iloc[0]) for column in CONFIGURATION if column not in shown}
+    return shown, common
+
+
+def _text(value: Any) -> str:
+    """A configuration value as table text: ``-`` for None (the default) or nothing, numbers without a trailing ``.0``."""
+    if value is None or value == "" or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
 def _with_ci(value: float, half: float, metric: str) -> str:
-    scale = 1 if metric == "test_mqi" else 100
-    return f"{scale * value:.1f} ± {scale * half:.1f}"
+    return format_ci(value, half, scale=1.0 if metric == "test_mqi" else 100.0)
 
 
 def main() -> None:
@@ -109,16 +168,23 @@ def main() -> None:
     if args.csv is not None:
         args.csv.parent.mkdir(parents=True, exist_ok=True)
         frame.to_csv(args.csv, index=False)
-    shown = frame.drop(columns=["run_id"]).copy()
+    configuration, common = shown_configuration(frame)
+    hidden = [column for column in CONFIGURATION if column not in configuration]
+    print("every run: " + ", ".join(f"{column} {value}" for column, value in common.items()) + "\n")
+    shown = frame.drop(columns=["run_id", *hidden]).copy()
+    for column in configuration:
+        shown[column] = shown[column].map(_text)
     for column in ("train_success", "train_success_first100", "train_success_last100", "test_success"):
         shown[column] = (100 * shown[column]).round(1)
     print(shown.to_string(index=False, float_format=lambda value: f"{value:.1f}"))
-    print("\nmean ± 95 % CI (t-interval over seeds); success in %")
-    print(summary_rows(frame).to_string(index=False))
+    print("\nmean ± 95 % CI (t-interval over seeds; n/a: one seed); success in %")
+    summary = summary_rows(frame).drop(columns=hidden)
+    print(summary.assign(**{c: summary[c].map(_text) for c in configuration}).to_string(index=False))
     paired = paired_rows(frame)
     if not paired.empty:
+        paired = paired.drop(columns=hidden)
         print("\npaired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences); success in points")
-        print(paired.to_string(index=False))
+        print(paired.assign(**{c: paired[c].map(_text) for c in configuration}).to_string(index=False))
 
 
 if __name__ == "__main__":

@@ -26,9 +26,20 @@ from pathlib import Path
 
 import pandas as pd
 
-from sb3_dtdpg.evaluation import mean_ci
+from sb3_dtdpg.evaluation import format_ci, mean_ci
+from sb3_dtdpg.experiments.budgets import check_seeds
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, compare_specs, evaluate_planners
-from sb3_dtdpg.experiments.runs import RunSpec, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.runs import (
+    DamagedRecordError,
+    OutputBusyError,
+    RunDivergedError,
+    RunMismatchError,
+    RunSpec,
+    get_budget,
+    load_result,
+    output_lock,
+    run_many,
+)
 from sb3_dtdpg.experiments.tables import ALGO_LABELS
 
 #: The two arms: the env's own mapping and the shares
@@ -83,7 +94,7 @@ def summary_lines(rows: pd.DataFrame, planners: dict[tuple[str, str], float], mi
                 continue
             mqi, ci = mean_ci(arm["mqi"])
             lines.append(
-                f"{label} {mapping} | {len(arm)} | {mqi:.1f} ± {ci:.1f} | {mqi / best:.3f} / {mqi / shortest:.3f} | "
+                f"{label} {mapping} | {len(arm)} | {format_ci(mqi, ci)} | {mqi / best:.3f} / {mqi / shortest:.3f} | "
                 f"{100 * arm['success_rate'].mean():.0f} |"
             )
         paired = group.pivot(index="seed", columns="power_mapping", values="mqi").dropna()
@@ -91,7 +102,7 @@ def summary_lines(rows: pd.DataFrame, planners: dict[tuple[str, str], float], mi
             difference, ci = mean_ci(paired["shares"] - paired["paper"])
             ahead = int((paired["shares"] > paired["paper"]).sum())
             lines.append(
-                f"{label} shares - paper, paired | {len(paired)} | {difference:+.1f} ± {ci:.1f} "
+                f"{label} shares - paper, paired | {len(paired)} | {_signed(format_ci(difference, ci))} "
                 f"(shares ahead on {ahead} of {len(paired)} seeds) | | |"
             )
     for mode in rows["multiple_access"].unique():
@@ -102,10 +113,34 @@ def summary_lines(rows: pd.DataFrame, planners: dict[tuple[str, str], float], mi
     return lines
 
 
+def _signed(text: str) -> str:
+    """:return: a :func:`~sb3_dtdpg.evaluation.format_ci` cell with the mean's sign (``+1.0 ± 0.5``)"""
+    return text if text.startswith(("-", "+")) else "+" + text
+
+
+def _seed_count(text: str) -> int:
+    """
+    :param text: the value of ``--seeds``
+    :return: the number of seeds (seeds 0..N-1 run)
+    :raises argparse.ArgumentTypeError: unless a count from 1 to :data:`~sb3_dtdpg.experiments.budgets.MAX_SEEDS`
+    """
+    try:
+        seeds = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seeds (a count from 1), got {text!r}") from None
+    try:
+        check_seeds(seeds)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+    return seeds
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--budget", default="paper", help="budget of the runs (default: paper, 500 episodes)")
-    parser.add_argument("--seeds", type=int, default=5, help="seeds per mode and mapping (default: 5)")
+    parser.add_argument(
+        "--seeds", type=_seed_count, default=5, help="how many seeds per mode and mapping, seeds 0..N-1 (a count; default: 5)"
+    )
     parser.add_argument("--modes", nargs="+", default=["noma", "oma"], choices=["noma", "oma"])
     parser.add_argument("--algos", nargs="+", default=["dtdpg"], choices=["dtdpg", "ddpg"], help="default: dtdpg")
     parser.add_argument(
@@ -115,17 +150,30 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2, help="runs at a time (default: 2)")
     parser.add_argument("--csv", type=Path, default=None, help="write one row per run here")
     args = parser.parse_args()
-    runs = specs(args.budget, args.seeds, args.modes, args.channel, tuple(args.algos))
-    with output_lock(args.out):
-        report = run_many(runs, args.out, n_workers=args.workers)
-    for run_id, error in report.failed.items():
-        print(f"run {run_id} failed: {error}")
-    rows = run_rows(args.out, runs)
+    try:
+        budget = get_budget(args.budget)
+    except ValueError as error:
+        parser.error(f"--budget: {error}")
+    if args.csv is not None:  # a folder that cannot be made fails now, not after the training
+        try:
+            args.csv.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            parser.error(f"--csv {args.csv}: {error}")
+    runs = specs(budget.name, args.seeds, args.modes, args.channel, tuple(args.algos))
+    try:
+        with output_lock(args.out):
+            report = run_many(runs, args.out, n_workers=args.workers)
+        for run_id, error in report.failed.items():
+            print(f"run {run_id} failed: {error}")
+        rows = run_rows(args.out, runs)
+    except (OutputBusyError, RunMismatchError, DamagedRecordError, RunDivergedError) as error:
+        # e.g. --channel or --budget other than those of the runs already in --out: one line, as the CLI's
+        parser.error(str(error))
     if rows.empty:
         raise SystemExit(f"no finished runs in {args.out}")
-    planner_rows, _ = evaluate_planners(args.modes, get_budget(args.budget), names=(BEST_PLANNER, SHORTEST_PATH_PLANNER))
+    planner_rows, _ = evaluate_planners(args.modes, budget, names=(BEST_PLANNER, SHORTEST_PATH_PLANNER))
     planners = {(row["algorithm"], row["multiple_access"]): float(row["mqi"]) for row in planner_rows}
-    print("\n".join(summary_lines(rows, planners, get_budget(args.budget).eval_episodes)))
+    print("\n".join(summary_lines(rows, planners, budget.eval_episodes)))
     if args.csv is not None:
         rows.to_csv(args.csv, index=False)
         print(f"wrote {args.csv}")

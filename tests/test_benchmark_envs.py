@@ -1,22 +1,12 @@
 """Benchmark scripts: `targets.py` trains on the observation layout it names, `paper_task_runs.py` tabulates runs."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import gymnasium as gym
 import pytest
+from scripts import load_script
 
 import noma_radiomap  # noqa: F401
-
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
-
-
-def load_script(name: str):
-    spec = importlib.util.spec_from_file_location(f"benchmark_{name}", BENCHMARKS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.mark.parametrize("observation", ["goal", "destinations"])

@@ -2,22 +2,14 @@
 
 import argparse
 import csv
-import importlib.util
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from scripts import ROOT, load_script
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "learning.py"
-
-
-def _module():
-    spec = importlib.util.spec_from_file_location("benchmark_learning", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+SCRIPT = ROOT / "benchmarks" / "learning.py"
 
 
 @pytest.mark.parametrize(
@@ -46,7 +38,7 @@ def _phase1(seed: int, reached: bool) -> dict:
 
 
 def test_the_report_holds_the_finished_runs_and_no_earlier_rows(tmp_path):
-    learning = _module()
+    learning = load_script("learning")
     (tmp_path / "learning.csv").write_text("seed,replay_handling\n7,keep\n")  # an earlier benchmark's rows
     args = argparse.Namespace(seeds=[0, 1, 2], handlings=["keep"], phase1_only=True, out=str(tmp_path))
     report = learning._write_report(args, {0: _phase1(0, True), 2: _phase1(2, True)}, [], 0.0, complete=False)

@@ -1,22 +1,13 @@
 """`benchmarks/targets.py` and `benchmarks/diagnosis.py`: options checked before anything runs, stored runs reused
 only with the settings they were run with, a fresh log per run, and no ``nan`` for the CI of one seed."""
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
+from scripts import load_script
 
 from sb3_dtdpg.experiments.storage import settings_mismatch
-
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
-
-
-def load_script(name: str):
-    spec = importlib.util.spec_from_file_location(f"benchmark_{name}_runs", BENCHMARKS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")

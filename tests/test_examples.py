@@ -1,19 +1,12 @@
 """examples/: a bad option is one error line before any work, and a trained model is saved before it is tested."""
 
-import importlib.util
-from pathlib import Path
-
 import matplotlib.pyplot as plt
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
+from scripts import load_script
 
 
 def example(name: str):
-    spec = importlib.util.spec_from_file_location(f"example_{name}", ROOT / "examples" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(name, folder="examples")
 
 
 @pytest.mark.parametrize(
