@@ -145,6 +145,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=ROUNDS, help="alternating rounds (best kept)")
     parser.add_argument("--vec-steps", type=int, default=VEC_STEPS, help="env steps per round of the vector envs (0: skip)")
     args = parser.parse_args()
+    for option, least in (("steps", 1), ("rounds", 1), ("vec_steps", 0)):
+        if getattr(args, option) < least:
+            parser.error(f"--{option.replace('_', '-')} must be >= {least}, got {getattr(args, option)}")
 
     best = run_env_benchmark(args.steps, args.rounds)
     reference = best["Pendulum-v1"]

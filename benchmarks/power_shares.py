@@ -150,6 +150,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2, help="runs at a time (default: 2)")
     parser.add_argument("--csv", type=Path, default=None, help="write one row per run here")
     args = parser.parse_args()
+    if args.workers < 1:
+        parser.error(f"--workers must be >= 1, got {args.workers}")
     try:
         budget = get_budget(args.budget)
     except ValueError as error:

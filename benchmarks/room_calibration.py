@@ -29,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 import noma_radiomap  # noqa: F401  (registers the envs)
+from noma_radiomap import load_scenario
 from noma_radiomap.geometry import grid_distance_field
 from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner
 from sb3_dtdpg.evaluation import evaluate
@@ -96,6 +97,12 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=10_000)
     args = parser.parse_args()
+    if args.episodes < 1:
+        parser.error(f"--episodes must be >= 1, got {args.episodes}")
+    try:
+        load_scenario(args.scenario)
+    except ValueError as error:  # names the scenario and the built-in ones
+        parser.error(f"--scenario: {error}")
     start = time.perf_counter()
     figures = measure(args.scenario, args.episodes, args.seed)
     print(f"{args.scenario}: {args.episodes} test missions (seeds {args.seed}..{args.seed + args.episodes - 1})")
