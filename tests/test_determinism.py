@@ -83,24 +83,31 @@ def _cpu_vendor() -> str:
 
 #: The scenarios whose radio maps are fingerprinted.
 MAP_SCENARIOS: tuple[str, ...] = ("mall", "small")
-#: The planners' digests are the same on both kinds of CPU recorded below (those added later are recorded on one).
+#: The planners' digests are the same on both kinds of CPU recorded below.
 PLANNER_DIGESTS: dict[str, str] = {
     "shortest": "362e0cd9e9c043c96e2662dd393a552da3d44c753952ddf8d0a9a9d3e88cd13d",
     "comm_aware": "93d467a892c24aa94153660912ba6e96224683502eb6ccfd4730560bf196cdd7",
     "comm_aware_oma": "1378beb50df2c787370508b6b1dbc3febc206679723024949fa80d7e5cad0c95",
+    "shortest_best_power": "7d8daa446ec04f52756069f068e81850745050f878c127e80baeaa82605a0fe3",
+    "reference": "a3f47ba14d73b0f2464a6a664acaa496596d2057b069285792d457743db75e16",
+    "reference_oma_rayleigh": "caf8b824837c5520debd46dcfd2de7b5979c16cfffd3ee5452c8d27d6c329e6d",
 }
 #: Digests per :func:`simd_level`: ``x86-64-v3`` recorded on an AVX2 machine, ``x86-64-v4`` on an AVX-512 one (the same
 #: code: the v3 digests also come out on the AVX-512 machine with numpy's AVX-512 kernels switched off,
 #: ``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR"``, except the training digest, where torch's kernels differ too).
 EXPECTED: dict[str, dict] = {
     "x86-64-v3": {
-        # The rollouts and the radio map of `mall` are not recorded on this kind: `mall` was recalibrated on
-        # 2026-12-06 (docs/SCENARIOS.md) on an AVX-512 machine; record them on an AVX2 one.
         "rollouts": {
+            "noma": "39227c6237970789f1a5786f7914d1a9f46b37946bfb866e46ea5d956121da9d",
+            "oma": "118ed82e3a9d5b9f8f73a6102f982b27a8c63f7b0c70b54a0cdbd97045ae9803",
+            "noma_rayleigh": "f57200548f4e19320f844eb95a03672dd0ca1031d85aae91fb9884be3aa2c34d",
+            "oma_rayleigh": "dbda5d9a49a8259bf631f69a908300f1dd3f00bd56608bf5ce186d77ac0917b4",
             "small": "4fae27defa682ea8a11516fc36d51279234c83b9d491f6d654569a9b16cc77b1",
             "small_combined_geodesic": "c1f9a245226986aa959a9b9d3fcd9f4920bcaeecc1781dc8a5b8d4a58e5fd839",
+            "mqi": "db4ab8dfd2b5dce92eba7bd886fe2e0898d9754c0c154c006c58f980fe370758",
         },
         "maps": {
+            "mall": "14793050f79f65eeb797f7176bbb3bca9682dac912ba077e5bc63a380069fa1f",
             "small": "76470d7a6d7d5b1eecd5de568b595015ba383f215442b57d2d82c462a7664eea",
         },
         "planners": PLANNER_DIGESTS,
@@ -120,12 +127,7 @@ EXPECTED: dict[str, dict] = {
             "mall": "fee363b5d4607bd8bb8b957ceab90348a0975ead0fed9ea58ad11abd8dcc7990",
             "small": "af596e12ed6b715f0e374d3f79fcf86a428fc1035f59588273d42efb9a7108df",
         },
-        "planners": {
-            **PLANNER_DIGESTS,
-            "shortest_best_power": "7d8daa446ec04f52756069f068e81850745050f878c127e80baeaa82605a0fe3",
-            "reference": "a3f47ba14d73b0f2464a6a664acaa496596d2057b069285792d457743db75e16",
-            "reference_oma_rayleigh": "caf8b824837c5520debd46dcfd2de7b5979c16cfffd3ee5452c8d27d6c329e6d",
-        },
+        "planners": PLANNER_DIGESTS,
         "training": "6726978da515208445ab30d0f96d82933a4c65488a32ae2641466df394a18d3a",
     },
 }
