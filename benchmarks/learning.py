@@ -250,6 +250,8 @@ def main() -> None:
                             flush=True,
                         )
     except KeyboardInterrupt:
+        if not phase1:  # nothing finished: an earlier benchmark's report in --out stays
+            raise SystemExit("interrupted before any run finished") from None
         _write_report(args, phase1, phase2, started, complete=False)
         raise SystemExit(f"interrupted: the finished runs are in {args.out}/learning.json and learning.csv") from None
     report = _write_report(args, phase1, phase2, started, complete=True)

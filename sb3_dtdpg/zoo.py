@@ -209,9 +209,10 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
       ``--trial-id`` without ``--storage`` and ``--study-name`` is an error instead of being ignored.
     - A budget that cannot train (``n_timesteps <= learning_starts``) is an error
       (:func:`sb3_dtdpg.baselines.check_training_budget`).
-    - A search worker that joins a shared study whose ``--max-total-trials`` are all held by other workers' running
-      trials ends with a line that says so (the zoo read ``study.best_trial`` of a study without a completed
-      trial: a traceback); a study whose trials all ended without completing is an error line.
+    - A search worker that joins a shared study (``--storage``, ``--study-name``) whose ``--max-total-trials`` are all
+      taken, none completed and some still running, ends with a line that says so (the zoo read ``study.best_trial``
+      of a study without a completed trial: a traceback); a stored study whose trials all ended without completing
+      is an error line.
 
     Every saved model records the env settings it was trained with (:func:`sb3_dtdpg.env_settings.record`), so
     ``sb3-dtdpg evaluate`` / ``enjoy`` refuse a mismatched env for SB3's algorithms too. For DT-DPG training runs it
@@ -324,19 +325,21 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
                 )
         try:
             super().hyperparameters_optimization()
-        except ValueError:  # the zoo's study.best_trial of a study without a completed trial
+        except ValueError as error:
+            if "No trials are completed yet" not in str(error):  # only the zoo's study.best_trial, not a trial's error
+                raise
             states = self._trial_states()
-            if states is None or states.get("COMPLETE"):
+            if states is None:
                 raise
             counts = ", ".join(f"{n} {state.lower()}" for state, n in sorted(states.items())) or "no trials"
-            if not states.get("RUNNING"):
-                raise ZooOptionError(
-                    f"no trial of the study {self.study_name!r} completed ({counts}): no best trial"
-                ) from None
+            taken = sum(states.get(state, 0) for state in ("COMPLETE", "RUNNING", "PRUNED"))
+            if self.max_total_trials is None or taken < self.max_total_trials or not states.get("RUNNING"):
+                message = f"no trial of the study {self.study_name!r} completed ({counts}): no best trial"
+                raise ZooOptionError(message) from error
             print(
-                f"The study {self.study_name!r} has no completed trial yet ({counts}) and the other workers hold all "
-                f"of its --max-total-trials {self.max_total_trials}: nothing for this worker to run; the best trial "
-                "is in the report of the worker that finishes last",
+                f"No trial of the study {self.study_name!r} has completed yet ({counts}) and its --max-total-trials "
+                f"{self.max_total_trials} are all taken: no best trial to report yet (the worker that finishes last "
+                "reports it)",
                 file=sys.stderr,
             )
 

@@ -140,9 +140,24 @@ def test_a_search_worker_that_finds_every_trial_taken_ends_without_a_traceback(t
     search += ["--max-total-trials", "1", "-n", "300", "-params", "learning_starts:50", "--env-kwargs", "scenario:'small'"]
     done = zoo_train(tmp_path, *search)
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-2000:]
-    assert "has no completed trial yet (1 running)" in done.stderr and "nothing for this worker to run" in done.stderr
+    assert "has completed yet (1 running) and its --max-total-trials 1 are all taken" in done.stderr
 
     study.tell(study.trials[0].number, state=optuna.trial.TrialState.PRUNED)
     done = zoo_train(tmp_path, *search)
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
     assert "error: no trial of the study 'shared' completed (1 pruned): no best trial" in done.stderr
+
+
+def test_a_trials_own_value_error_is_not_taken_for_a_study_without_a_completed_trial(monkeypatch):
+    import rl_zoo3.exp_manager
+
+    from sb3_dtdpg.zoo import ExperimentManager
+
+    def trial_fails(self):
+        raise ValueError("the objective's own error")
+
+    monkeypatch.setattr(rl_zoo3.exp_manager.ExperimentManager, "hyperparameters_optimization", trial_fails)
+    manager = object.__new__(ExperimentManager)  # only the attributes the search reads before the zoo's
+    manager.algo, manager.storage, manager.study_name, manager.max_total_trials = "ddpg", "s.log", "shared", 1
+    with pytest.raises(ValueError, match="the objective's own error"):
+        manager.hyperparameters_optimization()
