@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from sb3_dtdpg.arguments import positive_int, seed_int
 from sb3_dtdpg.common.files import write_json
 from sb3_dtdpg.experiments.storage import reuse_error
 
@@ -360,14 +361,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--configs", nargs="+", default=["base"], help="configurations to run (see --list)")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
-    parser.add_argument("--episodes", type=int, default=300, help="phase-1 episode budget per run")
-    parser.add_argument("--eval-every", type=int, default=25, help="episodes between deterministic evaluations")
-    parser.add_argument("--eval-missions", type=int, default=20, help="fixed missions per evaluation")
+    parser.add_argument("--seeds", type=seed_int, nargs="+", default=[0, 1])
+    parser.add_argument("--episodes", type=positive_int, default=300, help="phase-1 episode budget per run")
+    parser.add_argument("--eval-every", type=positive_int, default=25, help="episodes between deterministic evaluations")
+    parser.add_argument("--eval-missions", type=positive_int, default=20, help="fixed missions per evaluation")
     parser.add_argument("--stop-at", type=float, default=0.95, help="stop after two evaluations at this success")
     parser.add_argument("--base", choices=["tuned", "defaults"], default="tuned", help="the set-up the configs change")
     parser.add_argument("--env", default="NomaRadioMap-v0")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=positive_int, default=2)
     parser.add_argument("--out", default="results/diagnosis")
     parser.add_argument("--list", action="store_true", help="print the configurations and exit")
     parser.add_argument(
@@ -376,9 +377,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.list:
         return args
-    for option in ("episodes", "eval_every", "eval_missions", "workers"):
-        if getattr(args, option) < 1:
-            parser.error(f"--{option.replace('_', '-')} {getattr(args, option)}: must be at least 1")
     if not np.isfinite(args.stop_at):
         parser.error(f"--stop-at {args.stop_at}: expected a success rate")
     unknown = sorted(set(args.configs) - set(CONFIGS) | ({args.sooner_than} - set(CONFIGS) - {None}))

@@ -31,6 +31,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import noma_radiomap  # noqa: F401  (registers the ids)
+from sb3_dtdpg.arguments import non_negative_int, positive_int
 
 CASES: dict[str, tuple[str, dict]] = {
     "Pendulum-v1": ("Pendulum-v1", {}),
@@ -141,13 +142,12 @@ def run_env_benchmark(n_steps: int = STEPS, n_rounds: int = ROUNDS) -> dict[str,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=STEPS, help="steps per round")
-    parser.add_argument("--rounds", type=int, default=ROUNDS, help="alternating rounds (best kept)")
-    parser.add_argument("--vec-steps", type=int, default=VEC_STEPS, help="env steps per round of the vector envs (0: skip)")
+    parser.add_argument("--steps", type=positive_int, default=STEPS, help="steps per round")
+    parser.add_argument("--rounds", type=positive_int, default=ROUNDS, help="alternating rounds (best kept)")
+    parser.add_argument(
+        "--vec-steps", type=non_negative_int, default=VEC_STEPS, help="env steps per round of the vector envs (0: skip)"
+    )
     args = parser.parse_args()
-    for option, least in (("steps", 1), ("rounds", 1), ("vec_steps", 0)):
-        if getattr(args, option) < least:
-            parser.error(f"--{option.replace('_', '-')} must be >= {least}, got {getattr(args, option)}")
 
     best = run_env_benchmark(args.steps, args.rounds)
     reference = best["Pendulum-v1"]

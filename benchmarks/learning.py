@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from sb3_dtdpg.arguments import positive_int, seed_int
+
 HANDLINGS = ("keep", "clear", "relabel")
 
 
@@ -169,38 +171,31 @@ def run_phase2(seed: int, handling: str, args: argparse.Namespace, slot: int) ->
     }
 
 
-def _positive_int(text: str) -> int:
-    """argparse type: an integer >= 1 (argparse names the option and the value when it raises)."""
-    value = int(text)
-    if value < 1:
-        raise ValueError(text)
-    return value
-
-
 def _json_object(text: str) -> dict[str, Any]:
     """argparse type: a JSON object (DTDPG keyword arguments)."""
-    value = json.loads(text)
+    try:
+        value = json.loads(text)
+    except ValueError:
+        value = None
     if not isinstance(value, dict):
-        raise ValueError(text)
+        raise argparse.ArgumentTypeError(f"expected a JSON object of DTDPG keyword arguments, got {text!r}")
     return value
 
 
 def _parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="NomaRadioMap-v0")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds (each runs once)")
-    parser.add_argument(
-        "--phase1-episodes", type=_positive_int, default=500, help="phase-1 episode budget (the bar's horizon)"
-    )
-    parser.add_argument("--phase2-episodes", type=_positive_int, default=150, help="phase-2 episodes per replay handling")
+    parser.add_argument("--seeds", type=seed_int, nargs="+", default=[0, 1, 2], help="seeds (each runs once)")
+    parser.add_argument("--phase1-episodes", type=positive_int, default=500, help="phase-1 episode budget (the bar's horizon)")
+    parser.add_argument("--phase2-episodes", type=positive_int, default=150, help="phase-2 episodes per replay handling")
     parser.add_argument("--handlings", nargs="+", default=list(HANDLINGS), choices=HANDLINGS)
-    parser.add_argument("--eval-episodes", type=_positive_int, default=20, help="test missions with random fading")
-    parser.add_argument("--tail", type=_positive_int, default=30, help="phase-2 training episodes averaged at the end")
+    parser.add_argument("--eval-episodes", type=positive_int, default=20, help="test missions with random fading")
+    parser.add_argument("--tail", type=positive_int, default=30, help="phase-2 training episodes averaged at the end")
     parser.add_argument(
         "--hyperparams", type=_json_object, default={}, help="DTDPG kwargs as a JSON object, e.g. '{\"tau\": 0.005}'"
     )
     parser.add_argument("--phase1-only", action="store_true", help="skip the phase-2 replay-handling comparison")
-    parser.add_argument("--workers", type=_positive_int, default=2)
+    parser.add_argument("--workers", type=positive_int, default=2)
     parser.add_argument("--out", default="results/learning")
     args = parser.parse_args()
     args.seeds = list(dict.fromkeys(args.seeds))  # a seed given twice would write one run folder from two processes

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from sb3_dtdpg.arguments import positive_int
 from sb3_dtdpg.evaluation import format_ci, mean_ci
 from sb3_dtdpg.experiments.budgets import check_seeds
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, compare_specs, evaluate_planners
@@ -147,11 +148,9 @@ def main() -> None:
         "--channel", default="radio_map", choices=["radio_map", "rayleigh"], help="training channel (default: radio_map)"
     )
     parser.add_argument("--out", type=Path, default=Path("results/power_shares"), help="output folder")
-    parser.add_argument("--workers", type=int, default=2, help="runs at a time (default: 2)")
+    parser.add_argument("--workers", type=positive_int, default=2, help="runs at a time (default: 2)")
     parser.add_argument("--csv", type=Path, default=None, help="write one row per run here")
     args = parser.parse_args()
-    if args.workers < 1:
-        parser.error(f"--workers must be >= 1, got {args.workers}")
     try:
         budget = get_budget(args.budget)
     except ValueError as error:

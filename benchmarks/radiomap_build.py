@@ -25,6 +25,8 @@ import sys
 import time
 import tracemalloc
 
+from sb3_dtdpg.arguments import positive_int
+
 BAR_MALL_S = 0.25
 BAR_FINE_S = 10.0
 BAR_FINE_BYTES = 2 * 1024**3
@@ -105,11 +107,9 @@ def run_radiomap_benchmark(repeats: int = 5, fine_resolution: float = 0.1) -> di
 
 def main() -> None:
     parser = argparse.ArgumentParser(description="Radio-map build time and memory")
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=positive_int, default=5)
     parser.add_argument("--child", type=float, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if args.repeats < 1:
-        parser.error(f"--repeats must be >= 1, got {args.repeats}")
     if args.child is not None:
         _child(args.child)
         return

@@ -32,6 +32,7 @@ import noma_radiomap  # noqa: F401  (registers the envs)
 from noma_radiomap import load_scenario
 from noma_radiomap.geometry import grid_distance_field
 from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner
+from sb3_dtdpg.arguments import positive_int, seed_int
 from sb3_dtdpg.evaluation import evaluate
 from sb3_dtdpg.experiments.compare import mission_bound, planner_margins
 
@@ -94,11 +95,9 @@ def longest_mission(scenario: str = "mall") -> list[tuple[float, float]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="mall")
-    parser.add_argument("--episodes", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=10_000)
+    parser.add_argument("--episodes", type=positive_int, default=20)
+    parser.add_argument("--seed", type=seed_int, default=10_000)
     args = parser.parse_args()
-    if args.episodes < 1:
-        parser.error(f"--episodes must be >= 1, got {args.episodes}")
     try:
         load_scenario(args.scenario)
     except ValueError as error:  # names the scenario and the built-in ones

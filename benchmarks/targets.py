@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from sb3_dtdpg.arguments import non_negative_int, positive_int, seed_int
 from sb3_dtdpg.common.files import write_json
 from sb3_dtdpg.experiments.storage import reuse_error
 
@@ -239,9 +240,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--methods", nargs="+", default=["dtdpg", "ddpg"], choices=["dtdpg", "ddpg"])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    parser.add_argument("--episodes", type=int, default=500, help="training episodes per run, both phases together")
-    parser.add_argument("--eval-episodes", type=int, default=20, help="test missions with Rayleigh fading")
+    parser.add_argument("--seeds", type=seed_int, nargs="+", default=[0, 1, 2, 3, 4])
+    parser.add_argument("--episodes", type=positive_int, default=500, help="training episodes per run, both phases together")
+    parser.add_argument("--eval-episodes", type=positive_int, default=20, help="test missions with Rayleigh fading")
     parser.add_argument("--observation", choices=["goal", "destinations"], default="goal")
     parser.add_argument(
         "--success-threshold",
@@ -251,7 +252,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--destination-episodes",
-        type=int,
+        type=non_negative_int,
         default=0,
         help="DT-DPG's phase-1 episode cap (0: the whole budget, phase 1 then ends only by the early transfer)",
     )
@@ -262,14 +263,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--algo-kwargs", type=json.loads, default={}, help="constructor arguments of both methods, e.g. '{\"tau\": 0.02}'"
     )
     parser.add_argument("--tag", default="", help="the name of an --algo-kwargs variant (in its file names)")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=positive_int, default=2)
     parser.add_argument("--out", default="results/targets")
     args = parser.parse_args(argv)
-    for option in ("episodes", "eval_episodes", "workers"):
-        if getattr(args, option) < 1:
-            parser.error(f"--{option.replace('_', '-')} {getattr(args, option)}: must be at least 1")
-    if args.destination_episodes < 0:
-        parser.error(f"--destination-episodes {args.destination_episodes}: must be at least 0 (0: no cap)")
     if not 0 <= args.success_threshold <= 1:
         parser.error(f"--success-threshold {args.success_threshold}: must be in [0, 1] (0: no early transfer)")
     for option in ("env_kwargs", "algo_kwargs"):

@@ -46,6 +46,7 @@ from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from torch.nn import functional as F
 
 from sb3_dtdpg import DTDPG
+from sb3_dtdpg.arguments import checked, non_negative_int, positive_int
 from sb3_dtdpg.dtdpg.backprop import BackpropNetworks
 from sb3_dtdpg.dtdpg.lean import FusedAdamStep, LeanDDPG
 
@@ -55,6 +56,8 @@ DTDPG_LEAN, BASELINE = "DTDPG", "SB3 DDPG"
 NO_UPDATES = "DTDPG without updates"
 #: The floor of DTDPG's update with its backward passes written out, and the ceiling it sets with SB3's loop around it.
 WRITTEN_OUT_FLOOR, CEILING = "floor, DTDPG's written out", "ceiling, floor + loop"
+#: An argparse type: a minibatch size (batch normalisation needs two samples).
+BATCH_SIZE = checked(int, lambda n: n >= 2, "a batch size >= 2")
 #: Hyperparameters shared by all models (the tuned set's, :data:`sb3_dtdpg.presets.TUNED`), besides the command line's.
 SHARED = dict(learning_rate=1e-3, tau=0.005, gamma=0.95, n_steps=3)
 
@@ -249,19 +252,16 @@ def vec_benchmark(n_envs: int, net_arch: list[int], batch_size: int, steps: int,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=["Pendulum-v1", "NomaRadioMap-v0"])
-    parser.add_argument("--net-arch", type=int, nargs="+", default=[128, 128], help="hidden layers (the tuned set's)")
-    parser.add_argument("--batch-size", type=int, default=128, help="minibatch size (the tuned set's)")
-    parser.add_argument("--vec-envs", type=int, default=0, help="compare DTDPG on 1 env with the vector env of N (0: skip)")
-    parser.add_argument("--steps", type=int, default=500, help="env steps per timed chunk")
-    parser.add_argument("--repeats", type=int, default=5, help="timed chunks per algorithm, alternating")
-    parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads (1: fastest for small nets)")
+    parser.add_argument("--net-arch", type=positive_int, nargs="+", default=[128, 128], help="hidden layers (the tuned set's)")
+    parser.add_argument("--batch-size", type=BATCH_SIZE, default=128, help="minibatch size (the tuned set's)")
+    parser.add_argument(
+        "--vec-envs", type=non_negative_int, default=0, help="compare DTDPG on 1 env with the vector env of N (0: skip)"
+    )
+    parser.add_argument("--steps", type=positive_int, default=500, help="env steps per timed chunk")
+    parser.add_argument("--repeats", type=positive_int, default=5, help="timed chunks per algorithm, alternating")
+    parser.add_argument("--threads", type=positive_int, default=1, help="torch intra-op threads (1: fastest for small nets)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    for option, least in (("steps", 1), ("repeats", 1), ("threads", 1), ("batch_size", 2), ("vec_envs", 0)):
-        if getattr(args, option) < least:
-            parser.error(f"--{option.replace('_', '-')} must be >= {least}, got {getattr(args, option)}")
-    if min(args.net_arch) < 1:
-        parser.error(f"--net-arch: layer sizes must be >= 1, got {args.net_arch}")
     th.set_num_threads(args.threads)
     try:
         import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)

@@ -22,12 +22,13 @@ import torch as th
 
 import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)
 from sb3_dtdpg import DTDPG, MissionLoggerCallback, preset
+from sb3_dtdpg.arguments import positive_int, seed_int
 from sb3_dtdpg.evaluation import evaluate, format_ci
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--timesteps", type=int, default=5_000, help="training env steps")
+    parser.add_argument("--timesteps", type=positive_int, default=5_000, help="training env steps")
     parser.add_argument("--env", default="NomaRadioMap-v0", help="a NomaRadioMap env id")
     parser.add_argument(
         "--observation",
@@ -36,15 +37,14 @@ def main(argv: list[str] | None = None) -> None:
         help="goal-conditioned, destinations (positions, destinations, gains) or the paper's state, Eq. (24) "
         "(default: the env id's, goal on the missions, paper on the paper's task)",
     )
-    parser.add_argument("--eval-episodes", type=int, default=5, help="test episodes (Rayleigh fading)")
-    parser.add_argument("--seed", type=int, default=0, help="training seed")
+    parser.add_argument("--eval-episodes", type=positive_int, default=5, help="test episodes (Rayleigh fading)")
+    parser.add_argument("--seed", type=seed_int, default=0, help="training seed")
     parser.add_argument("--save-path", default="dtdpg_noma.zip", help="the saved model file")
     parser.add_argument("--tensorboard-log", default=None, help="TensorBoard folder (runs appear as DTDPG_<n>)")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest for these small networks)")
+    parser.add_argument(
+        "--threads", type=positive_int, default=1, help="torch threads (1 is fastest for these small networks)"
+    )
     args = parser.parse_args(argv)
-    for option in ("timesteps", "eval_episodes", "threads"):  # checked before training, not after it
-        if getattr(args, option) < 1:
-            parser.error(f"--{option.replace('_', '-')} must be >= 1, got {getattr(args, option)}")
     th.set_num_threads(args.threads)
 
     env_kwargs = {} if args.observation is None else {"observation": args.observation}

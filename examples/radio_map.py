@@ -16,6 +16,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 from noma_radiomap import RadioMap, list_scenarios, load_scenario
+from sb3_dtdpg.arguments import positive_int
 from sb3_dtdpg.common.files import safe_name
 
 
@@ -23,10 +24,8 @@ def main(argv: list[str] | None = None) -> Path:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="mall", help=f"built-in name ({', '.join(list_scenarios())}) or YAML path")
     parser.add_argument("--out", default="results/maps", help="output folder (default: results/maps)")
-    parser.add_argument("--dpi", type=int, default=120, help="resolution of the PNG (default: 120)")
+    parser.add_argument("--dpi", type=positive_int, default=120, help="resolution of the PNG (default: 120)")
     args = parser.parse_args(argv)
-    if args.dpi < 1:
-        parser.error(f"--dpi must be >= 1, got {args.dpi}")
     try:
         scenario = load_scenario(args.scenario)
     except ValueError as error:  # names the scenario and the built-in ones

@@ -33,6 +33,10 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from sb3_dtdpg.arguments import MAX_SEED as _MAX_SEED
+from sb3_dtdpg.arguments import checked, positive_int
+from sb3_dtdpg.arguments import seed_int as _seed
+
 __all__ = ["build_parser", "main"]
 
 # The choices of the options, spelled here so that --help needs no heavy import (tests/test_cli_errors.py checks
@@ -52,8 +56,6 @@ _OVERRIDES_HELP = (
     "policy_kwargs:'dict(net_arch=[64, 64])'); values are Python literals"
 )
 _MODES = ("noma", "oma")
-#: Seeds go to numpy and torch, which take 0 <= seed < 2**32 (sb3_dtdpg.experiments.specs._MAX_SEED).
-_MAX_SEED = 2**32 - 1
 _OBSERVATION_HELP = (
     "goal: each robot's position, destination, channel gain and arrived flag plus its direction and distance to "
     "its destination (an extension, docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget; "
@@ -661,26 +663,9 @@ def _budget(value: str) -> str:
     return value
 
 
-def _checked(convert: Any, valid: Any, expected: str) -> Any:
-    """An argparse type: ``convert(text)``, refused with ``expected ..., got ...`` unless ``valid`` holds."""
-
-    def parse(value: str) -> Any:
-        try:
-            number = convert(value)
-        except ValueError:
-            number = None
-        if number is None or not valid(number):
-            raise argparse.ArgumentTypeError(f"expected {expected}, got {value!r}")
-        return number
-
-    return parse
-
-
-_seed = _checked(int, lambda n: 0 <= n <= _MAX_SEED, f"a seed in 0..{_MAX_SEED} (numpy's and torch's range)")
-_learning_rate = _checked(float, lambda x: math.isfinite(x) and x > 0, "a positive finite learning rate")
-_threads = _checked(int, lambda n: n >= 0, "0 (torch's default) or a positive number of threads")
-_positive = _checked(int, lambda n: n >= 1, "a positive integer")
-_seed_count = _checked(int, lambda n: 1 <= n <= _MAX_SEEDS, f"a number of seeds from 1 to {_MAX_SEEDS:,}")
+_learning_rate = checked(float, lambda x: math.isfinite(x) and x > 0, "a positive finite learning rate")
+_threads = checked(int, lambda n: n >= 0, "0 (torch's default) or a positive number of threads")
+_seed_count = checked(int, lambda n: 1 <= n <= _MAX_SEEDS, f"a number of seeds from 1 to {_MAX_SEEDS:,}")
 
 
 def _check_no_file_on_the_way(value: str, folder: Path) -> None:
@@ -815,7 +800,7 @@ def _add_common_run_options(p: argparse.ArgumentParser, observation_default: str
     p.add_argument(
         "--observation", choices=_OBSERVATIONS, default=observation_default, help=f"{_OBSERVATION_HELP} ({observation_note})"
     )
-    p.add_argument("--workers", type=_positive, default=None, help="parallel processes (default: number of CPUs)")
+    p.add_argument("--workers", type=positive_int, default=None, help="parallel processes (default: number of CPUs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars; a line per finished run instead")
 
 
@@ -890,8 +875,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--scenario", type=_scenario, default=None, help="scenario name or YAML path (default: the env's, mall)")
     budget = p.add_mutually_exclusive_group()
-    budget.add_argument("--episodes", type=_positive, default=500, help="training episodes (default: 500, the paper's)")
-    budget.add_argument("--timesteps", type=_positive, default=None, help="training timesteps instead of episodes")
+    budget.add_argument("--episodes", type=positive_int, default=500, help="training episodes (default: 500, the paper's)")
+    budget.add_argument("--timesteps", type=positive_int, default=None, help="training timesteps instead of episodes")
     p.add_argument("--seed", type=_seed, default=0, help=f"seed of the run, 0..{_MAX_SEED} (default: 0)")
     p.add_argument("--multiple-access", choices=_MODES, default=None, help="NOMA or OMA downlink (default: the env id's)")
     p.add_argument(
@@ -915,12 +900,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--checkpoint-every",
-        type=_positive,
+        type=positive_int,
         default=10,
         help="NomaRadioMap envs: save model and replay buffer every N episodes; the same command resumes from the "
         "last one (default: 10)",
     )
-    p.add_argument("--eval-episodes", type=_positive, default=20, help="test episodes after training (default: 20)")
+    p.add_argument("--eval-episodes", type=positive_int, default=20, help="test episodes after training (default: 20)")
     p.add_argument("--eval-seed", type=_seed, default=10_000, help="seed of the first test episode (default: 10000)")
     p.add_argument(
         "--threads",
@@ -988,7 +973,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = command("evaluate", "test a saved model on the test missions and print the table of compare")
     _add_saved_model_options(p, "seed of the first test episode; episode i uses seed + i (default: 10000, as compare)")
-    p.add_argument("--n-episodes", type=_positive, default=20, help="test episodes (default: 20, the paper's)")
+    p.add_argument("--n-episodes", type=positive_int, default=20, help="test episodes (default: 20, the paper's)")
     p.add_argument("--json", type=_output_file((".json",)), default=None, help="also write summary and episodes as JSON")
     p.add_argument("--csv", type=_output_file((".csv",)), default=None, help="also write one row per episode as CSV")
     p.set_defaults(func=_cmd_evaluate)
@@ -1002,9 +987,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="write the mission as an animated .gif (or .mp4, needs ffmpeg): paths, power split, outage",
     )
-    p.add_argument("--fps", type=_positive, default=10, help="frames per second of the recording (default: 10)")
+    p.add_argument("--fps", type=positive_int, default=10, help="frames per second of the recording (default: 10)")
     p.add_argument(
-        "--max-frames", type=_positive, default=120, help="at most this many frames; long missions skip steps (default: 120)"
+        "--max-frames",
+        type=positive_int,
+        default=120,
+        help="at most this many frames; long missions skip steps (default: 120)",
     )
     p.set_defaults(func=_cmd_enjoy)
     return parser

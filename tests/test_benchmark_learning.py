@@ -14,14 +14,21 @@ SCRIPT = ROOT / "benchmarks" / "learning.py"
 
 @pytest.mark.parametrize(
     ("option", "value"),
-    [("--workers", "0"), ("--eval-episodes", "0"), ("--tail", "0"), ("--phase1-episodes", "-3"), ("--hyperparams", "[1]")],
+    [
+        ("--workers", "0"),
+        ("--eval-episodes", "0"),
+        ("--tail", "0"),
+        ("--phase1-episodes", "-3"),
+        ("--hyperparams", "[1]"),
+        ("--seeds", "-1"),
+    ],
 )
 def test_a_bad_option_is_one_error_line_naming_it(option, value, tmp_path):
     done = subprocess.run(
         [sys.executable, str(SCRIPT), option, value, "--out", str(tmp_path / "out")], capture_output=True, text=True
     )
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
-    assert f"argument {option}: invalid" in done.stderr and repr(value) in done.stderr
+    assert f"argument {option}: expected " in done.stderr and repr(value) in done.stderr
     assert not (tmp_path / "out").exists()
 
 

@@ -9,15 +9,15 @@ from scripts import load_script
 @pytest.mark.parametrize(
     ("script", "args", "message"),
     [
-        ("train_speed", ["--repeats", "0"], "--repeats must be >= 1, got 0"),  # printed ratios of no runs: nan
-        ("train_speed", ["--batch-size", "1"], "--batch-size must be >= 2, got 1"),
-        ("train_speed", ["--net-arch", "64", "0"], "--net-arch: layer sizes must be >= 1, got [64, 0]"),
-        ("env_speed", ["--rounds", "0"], "--rounds must be >= 1, got 0"),  # a ZeroDivisionError
-        ("env_speed", ["--steps", "0"], "--steps must be >= 1, got 0"),
-        ("radiomap_build", ["--repeats", "0"], "--repeats must be >= 1, got 0"),  # a StatisticsError after a build
-        ("room_calibration", ["--episodes", "0"], "--episodes must be >= 1, got 0"),
+        ("train_speed", ["--repeats", "0"], "argument --repeats: expected a positive integer, got '0'"),  # printed nan ratios
+        ("train_speed", ["--batch-size", "1"], "argument --batch-size: expected a batch size >= 2, got '1'"),
+        ("train_speed", ["--net-arch", "64", "0"], "argument --net-arch: expected a positive integer, got '0'"),
+        ("env_speed", ["--rounds", "0"], "argument --rounds: expected a positive integer, got '0'"),  # a ZeroDivisionError
+        ("env_speed", ["--steps", "0"], "argument --steps: expected a positive integer, got '0'"),
+        ("radiomap_build", ["--repeats", "0"], "argument --repeats: expected a positive integer, got '0'"),
+        ("room_calibration", ["--episodes", "0"], "argument --episodes: expected a positive integer, got '0'"),
         ("room_calibration", ["--scenario", "bogus"], "--scenario: scenario 'bogus': unknown built-in name"),
-        ("power_shares", ["--workers", "0"], "--workers must be >= 1, got 0"),  # 0 ran on every CPU
+        ("power_shares", ["--workers", "0"], "argument --workers: expected a positive integer, got '0'"),  # 0 ran on every CPU
     ],
 )
 def test_a_count_it_cannot_use_is_one_error_line(script, args, message, monkeypatch, capsys):

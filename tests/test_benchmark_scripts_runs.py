@@ -44,10 +44,11 @@ def store_targets_run(targets, out: Path, argv: list[str], method: str = "dtdpg"
 @pytest.mark.parametrize(
     "argv, option",
     [
-        (["--workers", "0"], "--workers 0"),
-        (["--episodes", "0"], "--episodes 0"),
-        (["--eval-episodes", "0"], "--eval-episodes 0"),
-        (["--destination-episodes", "-1"], "--destination-episodes -1"),
+        (["--workers", "0"], "argument --workers: expected a positive integer, got '0'"),
+        (["--episodes", "0"], "argument --episodes: expected a positive integer, got '0'"),
+        (["--eval-episodes", "0"], "argument --eval-episodes: expected a positive integer, got '0'"),
+        (["--seeds", "0", "-1"], "argument --seeds: expected a seed in 0.."),
+        (["--destination-episodes", "-1"], "argument --destination-episodes: expected an integer >= 0, got '-1'"),
         (["--success-threshold", "1.5"], "--success-threshold 1.5"),
         (["--env-kwargs", '["small"]'], "--env-kwargs: expected a JSON object, got ['small']"),
         (["--env", "NoSuchEnv-v0"], "--env NoSuchEnv-v0"),
@@ -64,7 +65,7 @@ def test_targets_refuses_an_unusable_option_before_anything_runs(targets, tmp_pa
 def test_diagnosis_refuses_a_count_below_one(diagnosis, tmp_path, capsys, option):
     out = tmp_path / "out"
     line = refused(diagnosis, [option, "0", "--out", str(out)], capsys)
-    assert line.endswith(f": error: {option} 0: must be at least 1")
+    assert line.endswith(f": error: argument {option}: expected a positive integer, got '0'")
     assert not out.exists()
 
 

@@ -12,9 +12,9 @@ def example(name: str):
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--eval-episodes", "0"], "--eval-episodes must be >= 1, got 0"),
-        (["--timesteps", "0"], "--timesteps must be >= 1, got 0"),
-        (["--threads", "-1"], "--threads must be >= 1, got -1"),
+        (["--eval-episodes", "0"], "argument --eval-episodes: expected a positive integer, got '0'"),
+        (["--timesteps", "0"], "argument --timesteps: expected a positive integer, got '0'"),
+        (["--threads", "-1"], "argument --threads: expected a positive integer, got '-1'"),
     ],
 )
 def test_quickstart_checks_its_options_before_training(args, message, tmp_path, capsys):
@@ -36,7 +36,7 @@ def test_quickstart_saves_where_it_says_and_shows_an_undefined_ci_as_such(tmp_pa
     ("args", "message"),
     [
         (["--scenario", "bogus"], "--scenario: scenario 'bogus': unknown built-in name"),
-        (["--dpi", "0"], "--dpi must be >= 1, got 0"),
+        (["--dpi", "0"], "argument --dpi: expected a positive integer, got '0'"),
     ],
 )
 def test_radio_map_example_errors_are_one_line_and_create_nothing(args, message, tmp_path, capsys):

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sb3_dtdpg.arguments import MAX_SEED
 from sb3_dtdpg.common.files import json_default, safe_name
 
 __all__ = ["RUN_FORMAT_VERSION", "RunDivergedError", "RunMismatchError", "RunSpec", "check_identity", "run_identity"]
@@ -32,7 +33,6 @@ _COUNTS = (
     ("eval_episodes", 1, False),
     ("eval_seed", 0, False),
 )
-_MAX_SEED = 2**32 - 1  # numpy's and torch's seed range; far above any budget
 _CHANNELS = ("radio_map", "rayleigh")
 
 
@@ -101,8 +101,8 @@ class RunSpec:
         """:raises ValueError: naming the first field that no run can have (before anything is trained)"""
         for name, low, optional in _COUNTS:
             value = getattr(self, name)
-            if (value is not None or not optional) and not (_is_int(value) and low <= value <= _MAX_SEED):
-                what = f"an integer from {low:,} to {_MAX_SEED:,}" + (" or None" if optional else "")
+            if (value is not None or not optional) and not (_is_int(value) and low <= value <= MAX_SEED):
+                what = f"an integer from {low:,} to {MAX_SEED:,}" + (" or None" if optional else "")
                 raise ValueError(f"RunSpec.{name}: expected {what}, got {value!r}")
         for name in ("channel", "eval_channel"):
             if getattr(self, name) not in _CHANNELS:
