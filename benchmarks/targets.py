@@ -129,10 +129,14 @@ def run_path(args: argparse.Namespace, method: str, seed: int) -> str:
     :param seed: the run's seed
     :return: the file's path
     """
-    tag = f"_{args.tag}" if args.tag else ""
-    transfer = transfer_name(args) if method == "dtdpg" else ""
-    variant = f"_{transfer}" if transfer else ""
-    return os.path.join(args.out, f"{method}_{args.observation}{tag}{variant}_seed{seed}.json")
+    return os.path.join(args.out, f"{method}_{_variant(args, method != 'dtdpg')}_seed{seed}.json")
+
+
+def _variant(args: argparse.Namespace, without_transfer: bool = False) -> str:
+    """``<observation>[_<tag>][_<transfer>]``: the part of the file names that says the runs' variant (the transfer
+    rule only for DT-DPG's runs and the summary)."""
+    transfer = "" if without_transfer else transfer_name(args)
+    return "_".join(part for part in (args.observation, args.tag, transfer) if part)
 
 
 def run_settings(method: str, args: argparse.Namespace) -> dict[str, Any]:
@@ -296,8 +300,6 @@ def main(argv: list[str] | None = None) -> None:
     """
     args = parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
-    transfer = transfer_name(args)
-    suffix = (f"_{args.tag}" if args.tag else "") + (f"_{transfer}" if transfer else "")
     todo = [(m, s) for m in args.methods for s in args.seeds if not os.path.exists(run_path(args, m, s))]
     print(f"{len(todo)} runs to do -> {args.out}", flush=True)
     from sb3_dtdpg.experiments.runs import worker_pool  # its workers end with this process
@@ -326,7 +328,7 @@ def main(argv: list[str] | None = None) -> None:
                 with open(run_path(args, m, s)) as f:
                     records.append(json.load(f))
     lines = summarize(records, planner, args)
-    with open(os.path.join(args.out, f"summary_{args.observation}{suffix}.md"), "w") as f:
+    with open(os.path.join(args.out, f"summary_{_variant(args)}.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))
 

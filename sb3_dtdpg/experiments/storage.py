@@ -471,7 +471,7 @@ def clear_checkpoints(run_dir: Path) -> None:
 def _as_option(key: str, value: Any) -> str:
     """An option and its value as typed on the command line (``--env-kwargs '{"scenario": "small"}'``)."""
     if value is None:
-        return f"--{key.replace('_', '-')} (not stored)"
+        return f"--{key.replace('_', '-')} (unset)"
     shown = f"'{json.dumps(value)}'" if isinstance(value, dict | list) else str(value)
     return f"--{key.replace('_', '-')} {shown}"
 
