@@ -264,6 +264,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
     from sb3_dtdpg.evaluation import format_ci
     from sb3_dtdpg.experiments.runs import DamagedRecordError, RunSpec, output_lock, read_checkpoint, run_one
     from sb3_dtdpg.experiments.storage import TRAINED_RECORD, run_lock_name
+    from sb3_dtdpg.overrides import override_text
 
     spec = RunSpec(
         args.algo,
@@ -280,7 +281,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
         hyperparams=args.hyperparams,
         timesteps=args.timesteps,
         observation=args.observation,
-        overrides=tuple((name, repr(value)) for name, value in args.overrides.items()),
+        overrides=tuple((name, override_text(value)) for name, value in args.overrides.items()),
     )
     out = Path(args.out)
     run_dir = out / "runs" / spec.run_id

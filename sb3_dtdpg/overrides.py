@@ -2,8 +2,9 @@
 
 ``sb3-dtdpg train --hyperparams learning_rate:3e-4 batch_size:256`` takes the RL Zoo's ``key:value`` form
 (``rl_zoo3``'s ``StoreDict``). The zoo evaluates each value as Python; here a value is a Python literal
-(``3e-4``, ``True``, ``[64, 64]``, ``'text'``) or ``dict(key=literal, ...)`` (the zoo's ``policy_kwargs`` form),
-read with :mod:`ast`, so a command line runs no code.
+(``3e-4``, ``True``, ``[64, 64]``, ``'text'``), ``dict(key=literal, ...)`` (the zoo's ``policy_kwargs`` form) or
+a torch module or optimizer class (``nn.Tanh``, ``th.optim.Adam``, as the zoo's files write them), read with
+:mod:`ast`, so a command line runs no code.
 
 :func:`check_constructor_kwargs` is the check both the CLI and ``python -m sb3_dtdpg.train`` run on a set of
 keyword arguments before the model is built: an unknown name gets a did-you-mean (a typo such as
@@ -25,6 +26,7 @@ __all__ = [
     "MAX_NETWORK_PARAMETERS",
     "HyperparameterError",
     "check_constructor_kwargs",
+    "override_text",
     "parse_overrides",
     "parse_value",
 ]
@@ -40,7 +42,73 @@ class HyperparameterError(ValueError):
     """A hyperparameter override or file entry that cannot be used (named, with the value)."""
 
 
+#: Where ``--hyperparams`` finds the classes it may name (the RL Zoo's files write ``nn.ReLU``, ``th.optim.Adam``):
+#: each prefix's module and the base class its names must be.
+_CLASS_MODULES: dict[str, tuple[str, str]] = {
+    prefix: (module, base)
+    for prefixes, module, base in (
+        (("nn", "th.nn", "torch.nn"), "torch.nn", "Module"),
+        (("optim", "th.optim", "torch.optim"), "torch.optim", "Optimizer"),
+    )
+    for prefix in prefixes
+}
+
+
+def _dotted_name(node: ast.AST) -> str | None:
+    """:return: ``"th.nn.ReLU"`` for a chain of attribute names, None for any other expression"""
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        owner = _dotted_name(node.value)
+        return None if owner is None else f"{owner}.{node.attr}"
+    return None
+
+
+def _torch_class(node: ast.Attribute, text: str) -> type:
+    """:return: the torch class an attribute chain names (``nn.Tanh``: ``torch.nn.Tanh``), imported on first use
+    :raises HyperparameterError: a name outside :data:`_CLASS_MODULES`, or one its module has no class of"""
+    import importlib
+
+    dotted = _dotted_name(node)
+    prefix, _, name = (dotted or "").rpartition(".")
+    if prefix not in _CLASS_MODULES:
+        raise HyperparameterError(
+            f"{text!r}: {dotted or ast.unparse(node)!r} is not a literal; the names a value may hold are torch's "
+            "module and optimizer classes (e.g. nn.ReLU, th.optim.Adam)"
+        )
+    module_name, base_name = _CLASS_MODULES[prefix]
+    module = importlib.import_module(module_name)
+    base = getattr(module, base_name)
+    found = getattr(module, name, None)
+    if not (isinstance(found, type) and issubclass(found, base)):
+        known = [n for n in dir(module) if isinstance(getattr(module, n), type) and issubclass(getattr(module, n), base)]
+        raise HyperparameterError(f"{text!r}: {module_name} has no {base_name} class {name!r}{_closest(name, known)}")
+    return found
+
+
+def override_text(value: Any) -> str:
+    """
+    :param value: an override value as :func:`parse_value` returns it
+    :return: its text, which :func:`parse_value` reads back to the same value: ``repr(value)``, with the torch
+        classes it holds written as ``nn.Tanh`` / ``th.optim.Adam``
+    """
+    if isinstance(value, type):
+        for prefix, (module_name, _) in (("nn", _CLASS_MODULES["nn"]), ("th.optim", _CLASS_MODULES["th.optim"])):
+            if value.__module__.startswith(module_name + ".") or value.__module__ == module_name:
+                return f"{prefix}.{value.__name__}"
+        return repr(value)
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{override_text(key)}: {override_text(item)}" for key, item in value.items()) + "}"
+    if isinstance(value, list):
+        return "[" + ", ".join(map(override_text, value)) + "]"
+    if isinstance(value, tuple):
+        return "(" + ", ".join(map(override_text, value)) + ("," if len(value) == 1 else "") + ")"
+    return repr(value)
+
+
 def _literal(node: ast.AST, text: str) -> Any:
+    if isinstance(node, ast.Attribute):  # nn.ReLU, th.optim.Adam: the classes of the zoo's policy_kwargs
+        return _torch_class(node, text)
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" and not node.args:
         if any(keyword.arg is None for keyword in node.keywords):
             raise HyperparameterError(f"{text!r}: dict(**...) is not a literal")
@@ -114,7 +182,7 @@ def _closest(name: str, known: list[str]) -> str:
     return f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
 
 
-#: Policy arguments that take a class (a string names none: the CLI's --hyperparams reads Python literals only)
+#: Policy arguments that take a class (a quoted name is a string, not the class: nn.ReLU is written unquoted)
 _CLASS_ARGUMENTS = ("activation_fn", "optimizer_class", "features_extractor_class")
 
 
@@ -133,11 +201,9 @@ def _check_policy_kwargs(algo_class: type, policy_kwargs: Mapping[str, Any], whe
                     )
     for name in _CLASS_ARGUMENTS:
         if isinstance(policy_kwargs.get(name), str):
-            literal = "--hyperparams" in where  # the CLI's: Python literals only
             raise HyperparameterError(
-                f"policy_kwargs[{name!r}]{where} must be a class (e.g. torch.nn.ReLU), got the string "
+                f"policy_kwargs[{name!r}]{where} must be a class (e.g. nn.ReLU, unquoted), got the string "
                 f"{policy_kwargs[name]!r}"
-                + ("; --hyperparams takes Python literals only: give classes in an RL Zoo file" if literal else "")
             )
 
 

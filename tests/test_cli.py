@@ -337,3 +337,19 @@ def test_the_transfer_dip_counts_the_seeds_whose_log_was_read(tmp_path):
     dip = _dip_table(tmp_path, experiments, results)
     assert (dip["n"] == 0).all() and dip["final"].isna().all()
     assert (tmp_path / "transfer_dip.csv").exists()
+
+
+def test_train_takes_a_torch_class_in_hyperparams_and_resumes_the_run(tmp_path, capsys):
+    """``activation_fn=nn.Tanh`` as in the RL Zoo's files: the model gets it, and the run's stored text reads back
+    to the same settings (a second command finds the finished run instead of refusing it as another run's)."""
+    policy_kwargs = "policy_kwargs:dict(net_arch=[16, 16], activation_fn=nn.Tanh)"
+    argv = ["train", "--algo", "ddpg", "--scenario", "small", "--timesteps", "300", "--eval-episodes", "1"]
+    argv += ["--hyperparams", "learning_starts:100", policy_kwargs, "--out", str(tmp_path), "--no-progress"]
+    assert main(argv) == 0
+    (result_file,) = tmp_path.glob("runs/*/result.json")
+    assert "'activation_fn': nn.Tanh" in dict(json.loads(result_file.read_text())["spec"]["overrides"])["policy_kwargs"]
+    model = DDPG.load(result_file.parent / "model.zip")
+    assert [type(layer).__name__ for layer in model.policy.actor.mu] == ["Linear", "Tanh", "Linear", "Tanh", "Linear", "Tanh"]
+    stored = result_file.read_text()
+    capsys.readouterr()
+    assert main(argv) == 0 and result_file.read_text() == stored  # the finished run, not trained again

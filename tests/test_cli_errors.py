@@ -45,7 +45,7 @@ def assert_one_error_line(code, printed, command, message):
         (["--hyperparams", "gamma:__import__('os')"], "is not a Python literal"),
         # were tracebacks after --out was made (the check built the model without its networks and buffer)
         (["--hyperparams", "policy_kwargs:dict(net_arc=[64, 64])"], "policy_kwargs key 'net_arc' for DTDPGPolicy"),
-        (["--hyperparams", "policy_kwargs:dict(activation_fn='relu')"], "must be a class (e.g. torch.nn.ReLU), got"),
+        (["--hyperparams", "policy_kwargs:dict(activation_fn='relu')"], "must be a class (e.g. nn.ReLU, unquoted), got"),
         (["--hyperparams", "replay_buffer_kwargs:dict(foo=1)"], "unexpected keyword argument 'foo'"),
         (["--hyperparams", "optimize_memory_usage:True"], "does not support optimize_memory_usage"),
         (["--hyperparams", "action_noise:0.1"], "action_noise must be an ActionNoise (e.g. NormalActionNoise(mean, sigma))"),

@@ -2,11 +2,13 @@
 
 import argparse
 import importlib
+import re
 import sys
 from importlib.metadata import version
 
 import gymnasium as gym
 import pytest
+import torch as th
 
 from sb3_dtdpg.cli import build_parser, main
 from sb3_dtdpg.experiments.reproduce import DEFAULT_EXPERIMENTS, reproduce_specs
@@ -200,3 +202,47 @@ def test_zoo_scripts_without_the_zoo_extra_say_what_to_install(script, monkeypat
     assert message.startswith(f"python -m sb3_dtdpg.{script}: error: ") and "\n" not in message
     # the package is installed from a clone, not from an index it is not on
     assert "'zoo' extra (rl_zoo3 is not installed)" in message and 'pip install -e ".[zoo]"' in message
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("nn.Tanh", th.nn.Tanh),
+        ("th.nn.ReLU", th.nn.ReLU),
+        ("torch.optim.RMSprop", th.optim.RMSprop),
+        ("dict(net_arch=[64, 64], activation_fn=nn.Tanh)", {"net_arch": [64, 64], "activation_fn": th.nn.Tanh}),
+        ("{'optimizer_class': th.optim.Adam, 'x': (1,)}", {"optimizer_class": th.optim.Adam, "x": (1,)}),
+    ],
+)
+def test_hyperparameter_values_name_torch_classes_as_the_zoo_writes_them(text, expected):
+    from sb3_dtdpg.overrides import override_text, parse_value
+
+    value = parse_value(text)
+    assert value == expected
+    assert parse_value(override_text(value)) == value  # the text a run's spec stores reads back to the value
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("nn.Tanhh", "torch.nn has no Module class 'Tanhh'; did you mean 'Tanh'"),
+        ("nn.functional", "torch.nn has no Module class 'functional'"),
+        ("os.system", "'os.system' is not a literal; the names a value may hold are torch's"),
+        ("dict(activation_fn=nn.ReLU())", "is not a Python literal"),
+    ],
+)
+def test_a_name_that_is_not_a_torch_class_is_refused(text, message):
+    from sb3_dtdpg.overrides import HyperparameterError, parse_value
+
+    with pytest.raises(HyperparameterError, match=re.escape(message)):
+        parse_value(text)
+
+
+@pytest.mark.parametrize(
+    "value", [3e-4, [64, 64], {"net_arch": [64, 64]}, {"pi": [8], "qf": [8]}, (1,), (), "relabel", None, True, {}]
+)
+def test_the_text_of_a_value_without_classes_is_its_repr(value):
+    """Run ids hash the overrides' text: runs stored before classes were allowed keep their ids."""
+    from sb3_dtdpg.overrides import override_text
+
+    assert override_text(value) == repr(value)

@@ -29,7 +29,7 @@ def zoo_train(tmp_path, *args):
         ("  seed: 3\n", "or -params): set it with --seed, not as a hyperparameter"),
         ("  batch_size: 1\n", "batch_size must be at least 2 with batch normalisation"),
         ('  policy_kwargs: "dict(net_arc=[64])"\n', "unknown policy_kwargs key 'net_arc' for DTDPGPolicy"),  # traceback
-        ("  policy_kwargs: \"dict(activation_fn='relu')\"\n", "must be a class (e.g. torch.nn.ReLU), got the string"),
+        ("  policy_kwargs: \"dict(activation_fn='relu')\"\n", "must be a class (e.g. nn.ReLU, unquoted), got the string"),
         (
             "  phases:\n    - {name: dest, n_episodes: 2}\n    - {name: mqi}\n",
             "phases (env Pendulum-v1 in ",  # an env without reward phases
