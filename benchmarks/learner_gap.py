@@ -43,6 +43,7 @@ import pandas as pd
 import noma_radiomap  # noqa: F401  (registers the envs)
 from noma_radiomap.planners import ReferencePlanner, ShortestPathPlanner, best_power, channel_maps, outages
 from noma_radiomap.propagation import dbm_to_watt
+from sb3_dtdpg.arguments import positive_int
 from sb3_dtdpg.evaluation import evaluate, mean_ci
 from sb3_dtdpg.experiments.tables import ALGO_LABELS
 from sb3_dtdpg.model_files import read_saved_model
@@ -284,22 +285,11 @@ def read_missions(path: Path) -> pd.DataFrame:
     return missions
 
 
-def _count(text: str) -> int:
-    """:return: a number of test missions, at least 1"""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a number of test missions (a count from 1), got {text!r}")
-    return value
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", type=Path, nargs="?", help="output folder of compare or reproduce (its runs/*/model.zip)")
     # None where not given: they measure an output folder, and --from-csv refuses them
-    parser.add_argument("--episodes", type=_count, default=None, help="test missions (default: 20, as compare)")
+    parser.add_argument("--episodes", type=positive_int, default=None, help="test missions (default: 20, as compare)")
     parser.add_argument("--seed", type=int, default=None, help="reset seed of test mission 0 (default: 10000)")
     parser.add_argument(
         "--runs", default=None, help="only the run folders matching this glob pattern, e.g. '*_radio_map_500_tuned_goal'"

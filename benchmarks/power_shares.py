@@ -26,9 +26,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from sb3_dtdpg.arguments import positive_int
+from sb3_dtdpg.arguments import positive_int, seed_count
 from sb3_dtdpg.evaluation import format_ci, mean_ci
-from sb3_dtdpg.experiments.budgets import check_seeds
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, compare_specs, evaluate_planners
 from sb3_dtdpg.experiments.runs import (
     DamagedRecordError,
@@ -119,28 +118,11 @@ def _signed(text: str) -> str:
     return text if text.startswith(("-", "+")) else "+" + text
 
 
-def _seed_count(text: str) -> int:
-    """
-    :param text: the value of ``--seeds``
-    :return: the number of seeds (seeds 0..N-1 run)
-    :raises argparse.ArgumentTypeError: unless a count from 1 to :data:`~sb3_dtdpg.experiments.budgets.MAX_SEEDS`
-    """
-    try:
-        seeds = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seeds (a count from 1), got {text!r}") from None
-    try:
-        check_seeds(seeds)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
-    return seeds
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--budget", default="paper", help="budget of the runs (default: paper, 500 episodes)")
     parser.add_argument(
-        "--seeds", type=_seed_count, default=5, help="how many seeds per mode and mapping, seeds 0..N-1 (a count; default: 5)"
+        "--seeds", type=seed_count, default=5, help="how many seeds per mode and mapping, seeds 0..N-1 (a count; default: 5)"
     )
     parser.add_argument("--modes", nargs="+", default=["noma", "oma"], choices=["noma", "oma"])
     parser.add_argument("--algos", nargs="+", default=["dtdpg"], choices=["dtdpg", "ddpg"], help="default: dtdpg")

@@ -12,10 +12,13 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["MAX_SEED", "checked", "non_negative_int", "positive_int", "seed_int"]
+__all__ = ["MAX_SEED", "MAX_SEEDS", "checked", "non_negative_int", "positive_int", "seed_count", "seed_int"]
 
 #: Seeds go to numpy and torch, which take 0 <= seed < 2**32.
 MAX_SEED = 2**32 - 1
+#: The most seeds per configuration a job takes (seeds 0..N-1): 1,000 paper-scale runs of one configuration take weeks
+#: of CPU, and a mistyped count (10**11) would fill the memory with run specs before anything ran.
+MAX_SEEDS = 1_000
 
 
 def checked(convert: Callable[[str], Any], valid: Callable[[Any], bool], expected: str) -> Callable[[str], Any]:
@@ -43,3 +46,4 @@ def checked(convert: Callable[[str], Any], valid: Callable[[Any], bool], expecte
 positive_int = checked(int, lambda n: n >= 1, "a positive integer")
 non_negative_int = checked(int, lambda n: n >= 0, "an integer >= 0")
 seed_int = checked(int, lambda n: 0 <= n <= MAX_SEED, f"a seed in 0..{MAX_SEED} (numpy's and torch's range)")
+seed_count = checked(int, lambda n: 1 <= n <= MAX_SEEDS, f"a number of seeds from 1 to {MAX_SEEDS:,}")

@@ -35,6 +35,7 @@ from typing import Any
 
 from sb3_dtdpg.arguments import MAX_SEED as _MAX_SEED
 from sb3_dtdpg.arguments import checked, positive_int
+from sb3_dtdpg.arguments import seed_count as _seed_count
 from sb3_dtdpg.arguments import seed_int as _seed
 
 __all__ = ["build_parser", "main"]
@@ -45,7 +46,6 @@ _ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
 _PRESETS = ("paper", "tuned")
 _OBSERVATIONS = ("goal", "destinations", "paper")
 _DEFAULT_ENV_ID = "NomaRadioMap-v0"
-_MAX_SEEDS = 1_000  # sb3_dtdpg.experiments.budgets.MAX_SEEDS
 _EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
 _PRESET_HELP = (
     "hyperparameter set. tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; "
@@ -666,7 +666,6 @@ def _budget(value: str) -> str:
 
 _learning_rate = checked(float, lambda x: math.isfinite(x) and x > 0, "a positive finite learning rate")
 _threads = checked(int, lambda n: n >= 0, "0 (torch's default) or a positive number of threads")
-_seed_count = checked(int, lambda n: 1 <= n <= _MAX_SEEDS, f"a number of seeds from 1 to {_MAX_SEEDS:,}")
 
 
 def _check_no_file_on_the_way(value: str, folder: Path) -> None:

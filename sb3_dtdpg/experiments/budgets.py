@@ -5,13 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from sb3_dtdpg.arguments import MAX_SEEDS
 from sb3_dtdpg.experiments.specs import RunSpec
 
 __all__ = ["BUDGETS", "BUDGET_ALIASES", "MAX_SEEDS", "PUBLIC_BUDGETS", "Budget", "check_budget", "check_seeds", "get_budget"]
-
-#: The most seeds per configuration a job takes (seeds 0..N-1): 1,000 paper-scale runs of one configuration take weeks
-#: of CPU, and a mistyped count (10**11) would fill the memory with run specs before anything ran.
-MAX_SEEDS = 1_000
 
 
 @dataclass(frozen=True)
