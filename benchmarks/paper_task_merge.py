@@ -24,8 +24,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from sb3_dtdpg.experiments.budgets import PUBLIC_BUDGETS, Budget, get_budget
-from sb3_dtdpg.experiments.paper_task import merge_runs, table_name, write_tables
+from sb3_dtdpg.experiments.budgets import PUBLIC_BUDGETS, get_budget
+from sb3_dtdpg.experiments.paper_task import merge_runs, table_name, task_episodes, write_tables
 
 #: The columns of ``paper_task_runs.csv`` that the merge and the tables read
 REQUIRED_COLUMNS = (
@@ -61,16 +61,6 @@ def read_runs(path: Path) -> pd.DataFrame:
             "of a reproduce folder)"
         )
     return records
-
-
-def task_episodes(budget: Budget, channel: str) -> int:
-    """
-    :param budget: a budget
-    :param channel: the training channel
-    :return: the training episodes of the budget's paper-task runs on that channel (as
-        :func:`sb3_dtdpg.experiments.paper_task.paper_task_specs` sets them)
-    """
-    return budget.task_episodes if channel == "radio_map" else budget.task_long_episodes
 
 
 def check_budget_episodes(name: str, records: pd.DataFrame, channel: str) -> None:

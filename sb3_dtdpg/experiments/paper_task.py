@@ -33,6 +33,7 @@ __all__ = [
     "paper_task_specs",
     "paper_task_tables",
     "table_name",
+    "task_episodes",
     "training_success",
     "write_tables",
 ]
@@ -46,6 +47,17 @@ LAST_EPISODES = 100
 #: The paper's claim: DDPG below, DT-DPG above these training success rates.
 PAPER_CLAIM = {"DDPG": ("<", 0.20), "DT-DPG": (">", 0.95)}
 _METRICS = ("train_success", "train_success_first", "train_success_last", "success_rate", "mqi")
+
+
+def task_episodes(budget: Budget, channel: str = "radio_map") -> int:
+    """
+    :param budget: the experiment's scale
+    :param channel: the training channel
+    :return: the training episodes of a paper-task run: :attr:`~sb3_dtdpg.experiments.budgets.Budget.task_episodes`
+        on the radio map, :attr:`~sb3_dtdpg.experiments.budgets.Budget.task_long_episodes` (Table II's 700 at the
+        paper's scale) with Rayleigh fading
+    """
+    return budget.task_long_episodes if channel == "rayleigh" else budget.task_episodes
 
 
 def paper_task_specs(
@@ -62,7 +74,7 @@ def paper_task_specs(
         the caller)
     """
     reality = channel == "rayleigh"
-    episodes = budget.task_long_episodes if reality else budget.task_episodes
+    episodes = task_episodes(budget, channel)
     return [
         spec
         for preset in PRESETS
