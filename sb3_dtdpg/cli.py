@@ -53,7 +53,8 @@ _PRESET_HELP = (
 )
 _OVERRIDES_HELP = (
     "override single hyperparameters, RL Zoo style: key:value ... (e.g. learning_rate:3e-4 batch_size:256 "
-    "policy_kwargs:'dict(net_arch=[64, 64])'); values are Python literals"
+    "policy_kwargs:'dict(net_arch=[64, 64], activation_fn=nn.Tanh)'); values are Python literals or torch's module "
+    "and optimizer classes (nn.Tanh, th.optim.Adam)"
 )
 _MODES = ("noma", "oma")
 _OBSERVATION_HELP = (

@@ -19,6 +19,7 @@ import difflib
 import inspect
 import itertools
 import math
+import sys
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
@@ -92,9 +93,9 @@ def override_text(value: Any) -> str:
     :return: its text, which :func:`parse_value` reads back to the same value: ``repr(value)``, with the torch
         classes it holds written as ``nn.Tanh`` / ``th.optim.Adam``
     """
-    if isinstance(value, type):
-        for prefix, (module_name, _) in (("nn", _CLASS_MODULES["nn"]), ("th.optim", _CLASS_MODULES["th.optim"])):
-            if value.__module__.startswith(module_name + ".") or value.__module__ == module_name:
+    if isinstance(value, type):  # the names _torch_class reads: the classes torch.nn and torch.optim export
+        for module_name, prefix in (("torch.nn", "nn"), ("torch.optim", "th.optim")):
+            if getattr(sys.modules.get(module_name), value.__name__, None) is value:
                 return f"{prefix}.{value.__name__}"
         return repr(value)
     if isinstance(value, dict):
