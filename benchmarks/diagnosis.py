@@ -287,10 +287,10 @@ def run_settings(args: argparse.Namespace) -> dict[str, Any]:
     The options that determine a run's result, stored in its record and compared when the command is repeated.
 
     :param args: the command's options
-    :return: per option (its ``argparse`` dest), its value as the JSON record gives it back
+    :return: per option (its ``argparse`` dest), its value
     """
     names = ["env", "base", "episodes", "eval_every", "eval_missions", "stop_at"]
-    return json.loads(json.dumps({name: getattr(args, name) for name in names}))
+    return {name: getattr(args, name) for name in names}
 
 
 def _record(out: str, name: str, seed: int) -> dict[str, Any] | None:

@@ -145,12 +145,12 @@ def run_settings(method: str, args: argparse.Namespace) -> dict[str, Any]:
 
     :param method: ``"dtdpg"`` or ``"ddpg"`` (only DT-DPG's runs depend on the transfer rule)
     :param args: the command's options
-    :return: per option (its ``argparse`` dest), its value as the JSON record gives it back
+    :return: per option (its ``argparse`` dest), its value
     """
     names = ["env", "env_kwargs", "observation", "hyperparams", "algo_kwargs", "episodes", "eval_episodes"]
     if method == "dtdpg":
         names += ["success_threshold", "destination_episodes"]
-    return json.loads(json.dumps({name: getattr(args, name) for name in names}))
+    return {name: getattr(args, name) for name in names}
 
 
 def planner_mqi(args: argparse.Namespace) -> dict[str, Any]:
@@ -228,11 +228,6 @@ def summarize(records: list[dict[str, Any]], planner: dict[str, Any], args: argp
     return lines
 
 
-def _unique(values: list[Any]) -> list[Any]:
-    """``values`` without repeats, in their order (``--seeds 0 0`` runs seed 0 once)."""
-    return list(dict.fromkeys(values))
-
-
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """
     The command's options, checked before anything runs: counts, JSON objects, the env id, and the runs already
@@ -277,7 +272,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
             parser.error(f"--{option.replace('_', '-')}: expected a JSON object, got {getattr(args, option)!r}")
     if args.algo_kwargs and not args.tag:
         parser.error(f"--algo-kwargs {json.dumps(args.algo_kwargs)}: name the variant with --tag (its result files)")
-    args.methods, args.seeds = _unique(args.methods), _unique(args.seeds)
+    args.methods, args.seeds = list(dict.fromkeys(args.methods)), list(dict.fromkeys(args.seeds))
     import gymnasium as gym
 
     import noma_radiomap  # noqa: F401  (registers its env ids)

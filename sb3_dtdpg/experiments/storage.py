@@ -482,7 +482,8 @@ def settings_mismatch(path: str | Path, settings: dict[str, Any]) -> str | None:
     their record files by a few options only and store the others under the record's ``"settings"``.
 
     :param path: the run's record file (JSON)
-    :param settings: this command's settings of the run, per option (its ``argparse`` dest), as JSON gives them back
+    :param settings: this command's settings of the run, per option (its ``argparse`` dest); compared as the JSON
+        record gives them back (tuples as lists)
     :return: the reason, naming each option that differs with both values (or that the record cannot be checked);
         None when no record is stored or it has these settings
     """
@@ -496,6 +497,7 @@ def settings_mismatch(path: str | Path, settings: dict[str, Any]) -> str | None:
     stored = record.get("settings") if isinstance(record, dict) else None
     if not isinstance(stored, dict):
         return f"{path} was stored by an older version of this script, without its settings, so they cannot be checked"
+    settings = json.loads(json.dumps(settings))
     differ = [key for key in [*settings, *(k for k in stored if k not in settings)] if stored.get(key) != settings.get(key)]
     if not differ:
         return None
