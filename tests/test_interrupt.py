@@ -129,3 +129,20 @@ def test_a_worker_that_does_not_die_is_left_behind_with_a_message(monkeypatch, c
             worker.kill()
             worker.join()
     assert f"workers [{workers[0].pid}] did not end within 0.5 s of SIGKILL" in capsys.readouterr().err
+
+
+def test_a_worker_reaped_by_the_pool_itself_is_not_reported_as_stuck(monkeypatch, capsys):
+    # A SIGTERM to the whole process group kills the workers too, and the pool's own thread then waits for them:
+    # a worker already waited for elsewhere has ended, although multiprocessing's is_alive() says otherwise.
+    from sb3_dtdpg.experiments import pool as pool_module
+
+    monkeypatch.setattr(pool_module, "STOP_TIMEOUT_S", 5.0)
+    with pool_module.worker_pool(1) as pool:
+        pool.submit(time.sleep, 60)
+        (worker,) = pool._processes.values()
+        os.kill(worker.pid, signal.SIGKILL)
+        os.waitpid(worker.pid, 0)  # as the pool's thread does when one of its workers dies
+        start = time.monotonic()
+        pool_module._stop_workers(pool)
+        assert time.monotonic() - start < 5.0
+    assert "did not end" not in capsys.readouterr().err

@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
+from multiprocessing.connection import wait as wait_for_ready
 from pathlib import Path
 from typing import Any
 
@@ -227,8 +228,12 @@ def _stop_workers(executor: ProcessPoolExecutor) -> None:
             process.kill()
         stuck = []
         for process in processes:
-            process.join(timeout=STOP_TIMEOUT_S)
-            if process.is_alive():  # e.g. in uninterruptible I/O on a hung network disk
+            # Asked of the process's sentinel, which is ready once the process has ended whoever waited for it:
+            # the pool's own thread also joins the workers when one dies (a SIGTERM to the whole process group),
+            # and a process reaped there looks alive to this thread's join() and is_alive().
+            if wait_for_ready([process.sentinel], timeout=STOP_TIMEOUT_S):
+                process.join()
+            else:  # e.g. in uninterruptible I/O on a hung network disk
                 stuck.append(process.pid)
         if stuck:
             print(
