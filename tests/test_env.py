@@ -476,6 +476,41 @@ def test_reset_options_fix_the_mission():
         assert x0 <= env.positions[u, 0] <= x1 and y0 <= env.positions[u, 1] <= y1
 
 
+def test_given_starts_draw_only_the_destinations_a_mission_from_them_can_have():
+    # Robot 0 of `small` goes to (10, 2) or (10, 6): from (10, 2.5) it is already at the first, so every reset must
+    # send it to the second (it was refused on about one seed in four), and robot 1 to either of its two.
+    env = small_env()
+    drawn = set()
+    for seed in range(40):
+        env.reset(seed=seed, options={"starts": [[10.0, 2.5], [1.0, 6.0]]})
+        assert env.destinations[0].tolist() == [10.0, 6.0]
+        drawn.add(tuple(env.destinations[1]))
+    assert drawn == {(9.0, 4.0), (11.0, 7.0)}
+    # A start from which no destination can be had (the closet's, unreachable) is refused, naming it.
+    with pytest.raises(
+        ValueError, match=r"options\['starts'\]\[0\]: \[11\.5, 0\.5\] is within arrival_radius of, or unreachable"
+    ):
+        NomaRadioMapEnv(scenario=closet_scenario()).reset(seed=0, options={"starts": [[11.5, 0.5], [1.0, 6.0]]})
+
+
+def test_given_destinations_draw_starts_uniformly_from_the_start_region():
+    # Robot 0 also lists (1, 1), inside its start region: the cells near it are no less likely than the others
+    # for a destination given elsewhere (they were drawn half as often).
+    data = load_scenario("small").to_dict()
+    data["robots"][0]["destinations"] = [[1.0, 1.0], [10.0, 2.0]]
+    env = NomaRadioMapEnv(scenario=Scenario.from_dict(data))
+    env.reset(seed=0)
+    counts: dict[tuple[float, float], int] = {}
+    for _ in range(4000):
+        env.reset(options={"destinations": [[10.0, 6.0], [9.0, 4.0]]})
+        start = tuple(env.positions[0])
+        counts[start] = counts.get(start, 0) + 1
+    near = [n for (x, y), n in counts.items() if np.hypot(x - 1.0, y - 1.0) <= 1.0]
+    far = [n for (x, y), n in counts.items() if np.hypot(x - 1.0, y - 1.0) > 1.0]
+    assert near and far
+    assert 0.8 < np.mean(near) / np.mean(far) < 1.25
+
+
 # --- pickling, vec envs, rendering --------------------------------------------------------------------
 
 

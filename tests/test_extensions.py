@@ -1,5 +1,7 @@
 """The learning extensions: the goal-conditioned observation wrapper and replay seeded with demonstrations."""
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -81,8 +83,10 @@ def test_relative_goal_wrapper_passes_the_env_checker_and_keeps_reward_phases():
     check_env(env, skip_render_check=True)
     env.get_wrapper_attr("set_reward_phase")("mqi")
     assert env.unwrapped.reward_phase == "mqi"
-    with pytest.raises(ValueError, match="distance_scale"):
-        RelativeGoalObservation(_small(), distance_scale=0.0)
+    for bad in (0.0, float("inf"), "10", None, True):  # a string or None was numpy's TypeError, True taken as 1 m
+        with pytest.raises(ValueError, match=rf"distance_scale must be a finite number > 0, got {re.escape(repr(bad))}"):
+            RelativeGoalObservation(_small(), distance_scale=bad)
+    assert RelativeGoalObservation(_small(), distance_scale=np.float32(4.0)).distance_scale == 4.0
 
 
 def test_demonstrations_fill_the_replay_buffer_before_training():

@@ -292,4 +292,14 @@ def test_a_scenario_changed_in_code_is_validated_by_the_env():
         gym.make("NomaRadioMap-v0", scenario=no_power)
     louder = dataclasses.replace(small, ap=dataclasses.replace(small.ap, max_power_dbm=small.ap.max_power_dbm + 3))
     env = gym.make("NomaRadioMap-v0", scenario=louder)  # a valid change is taken as given
-    assert env.unwrapped.scenario is louder
+    assert env.unwrapped.scenario == louder
+    # and with the types a YAML file gives: numpy and integral float numbers, lists (they broke the TimeLimit and
+    # the radio map's cache)
+    for max_steps in (np.int64(20), 20.0):
+        env = gym.make(
+            "NomaRadioMap-v0",
+            scenario=dataclasses.replace(small, mission=dataclasses.replace(small.mission, max_steps=max_steps)),
+        )
+        assert type(env.unwrapped.scenario.mission.max_steps) is int and env.spec.max_episode_steps == 20
+    listed = gym.make("NomaRadioMap-v0", scenario=dataclasses.replace(small, robots=list(small.robots)))
+    assert listed.unwrapped.scenario == small

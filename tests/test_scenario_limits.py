@@ -370,6 +370,29 @@ def test_integers_are_read_by_yaml_1_2_rules(text, value):
     assert loaded == value and type(loaded) is type(value)
 
 
+@pytest.mark.parametrize(
+    ("text", "value"),
+    [("true", True), ("False", False), ("TRUE", True), ("no", "no"), ("NO", "NO"), ("on", "on"), ("off", "off"), ("y", "y")],
+)
+def test_booleans_are_read_by_yaml_1_2_rules(text, value):
+    """PyYAML's YAML 1.1 rules read no, on, off, yes, y and n as booleans."""
+    from noma_radiomap.scenario import ScenarioLoader
+
+    loaded = yaml.load(f"a: {text}\n", Loader=ScenarioLoader)["a"]
+    assert loaded == value and type(loaded) is type(value)
+
+
+def test_a_room_named_no_keeps_its_name(tmp_path, small_yaml):
+    assert load_scenario(_write(tmp_path, small_yaml.replace("name: small", "name: NO", 1))).name == "NO"
+
+
+@pytest.mark.parametrize("tag", ["", "!!int "])
+def test_an_integer_too_long_to_read_is_out_of_range_not_malformed(tmp_path, small_yaml, tag):
+    path = _write(tmp_path, small_yaml.replace("max_steps: 60", f"max_steps: {tag}{'9' * 5000}", 1))
+    with pytest.raises(ValueError, match=rf"^{path}, line \d+, column \d+: an integer of 5,000 digits is out of range$"):
+        load_scenario(path)
+
+
 def test_a_leading_zero_is_no_octal_prefix_in_a_scenario_file(tmp_path, small_yaml):
     assert "max_steps: 60" in small_yaml
     assert load_scenario(_write(tmp_path, small_yaml.replace("max_steps: 60", "max_steps: 010", 1))).mission.max_steps == 10

@@ -172,12 +172,13 @@ def _row_options(options: Any, n_rows: int) -> list[dict | None]:
 def load(scenario: str | os.PathLike[str] | Scenario) -> Scenario:
     """A scenario from a built-in name, a YAML path or a :class:`Scenario` (validated as a YAML file is)."""
     if isinstance(scenario, Scenario):
-        # One built or changed in code (``dataclasses.replace``) has not been through the checks of ``from_dict``
+        # One built or changed in code (``dataclasses.replace``) has not been through the checks of ``from_dict``;
+        # the checked copy is used, its values of the types a YAML file gives (e.g. ``max_steps=np.int64(20)`` an int)
         try:
-            Scenario.from_dict(scenario.to_dict())
+            checked = Scenario.from_dict(scenario.to_dict())
         except ValueError as error:
             raise ValueError(f"scenario {scenario.name!r} (a Scenario object, as given): {error}") from None
-        return scenario
+        return replace(checked, source=scenario.source)
     if isinstance(scenario, str | os.PathLike):
         return load_scenario(scenario)
     raise ValueError(f"scenario must be a scenario name, a YAML path or a Scenario, got {scenario!r}")

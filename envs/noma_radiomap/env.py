@@ -91,7 +91,9 @@ class NomaRadioMapEnv(gym.Env[np.ndarray, np.ndarray]):
     Each robot starts at the centre of a cell drawn uniformly from the free cells of its scenario start
     region (farther than ``arrival_radius`` from its destination), heading to one of its scenario
     destinations drawn uniformly. ``reset(options={"starts": [[x, y], ...], "destinations": [[x, y], ...]})``
-    fixes either or both (one ``[x, y]`` per robot, free and mutually reachable).
+    fixes either or both (one ``[x, y]`` per robot, free and mutually reachable); the other is drawn uniformly
+    among what fits: the scenario destinations reachable from a given start and farther than ``arrival_radius``,
+    or the start cells that can reach a given destination.
 
     ## Episode End
 

@@ -30,16 +30,18 @@ class MissionSampler:
         self.fixed_destinations = fixed_destinations
         self.n_robots = scenario.n_robots
         self._components = geometry.free_components(radio_map.blocked)
+        #: Per robot, the centres of the free cells of its start region
+        self._start_centres = [(radio_map.start_cells(u) + 0.5) * scenario.room.resolution for u in range(self.n_robots)]
         #: Per robot, its destinations and the free start cells not already at each of them
         self.choices = self._choices()
 
     def _choices(self) -> list[list[tuple[np.ndarray, np.ndarray]]]:
         """Per robot, its destinations (the first only in the paper's task) and the free start cells not already
         at each of them."""
-        sc, radio_map = self.scenario, self.radio_map
+        sc = self.scenario
         missions = []
         for u, robot in enumerate(sc.robots):
-            centres = (radio_map.start_cells(u) + 0.5) * sc.room.resolution
+            centres = self._start_centres[u]
             choices = []
             for destination in robot.destinations[:1] if self.fixed_destinations else robot.destinations:
                 far = starts_away_from(centres, destination, sc.robot.arrival_radius, u, robot.start)
@@ -64,7 +66,8 @@ class MissionSampler:
         if destinations is None:
             destinations = np.empty((self.n_robots, 2))
             for u, choices in enumerate(self.choices):
-                destinations[u] = choices[rng.integers(len(choices))][0]
+                goals = [goal for goal, _ in choices] if starts is None else self._destinations_for(u, starts[u])
+                destinations[u] = goals[rng.integers(len(goals))]
         if starts is None:
             starts = np.empty((self.n_robots, 2))
             for u, choices in enumerate(self.choices):
@@ -73,18 +76,38 @@ class MissionSampler:
         self._check_mission(starts, destinations)
         return starts, destinations
 
+    def _destinations_for(self, u: int, start: np.ndarray) -> list[np.ndarray]:
+        """Robot ``u``'s destinations (the first only in the paper's task) that a mission from ``start``, given
+        through the options, can have: reachable and farther than ``arrival_radius``."""
+        goals = [goal for goal, _ in self.choices[u] if self._can_go(start, goal)]
+        if not goals:
+            listed = [goal.tolist() for goal, _ in self.choices[u]]
+            raise ValueError(
+                f"options['starts'][{u}]: {start.tolist()} is within arrival_radius of, or unreachable from, every "
+                f"destination of robot {u} ({listed}); give options['destinations'] too"
+            )
+        return goals
+
     def _start_candidates(self, u: int, destination: np.ndarray, choices: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
         for goal, candidates in choices:
             if np.array_equal(goal, destination):
                 return candidates
-        # A destination given through the options: any free start cell farther than arrival_radius.
-        all_cells = np.concatenate([c for _, c in choices])
-        far = np.hypot(*(all_cells - destination).T) > self.scenario.robot.arrival_radius
-        if not far.any():
+        # A destination given through the options: any free cell of the start region that can go there.
+        centres = self._start_centres[u]
+        usable = self._can_go(centres, destination)
+        if not usable.any():
             raise ValueError(
-                f"options['destinations'][{u}]: {destination.tolist()} is within arrival_radius of every start cell"
+                f"options['destinations'][{u}]: {destination.tolist()} is within arrival_radius of, or unreachable "
+                f"from, every free cell of robot {u}'s start region {list(self.scenario.robots[u].start)}"
             )
-        return all_cells[far]
+        return centres[usable]
+
+    def _can_go(self, starts: np.ndarray, destination: np.ndarray) -> np.ndarray:
+        """Whether missions from ``starts`` (one point or (k, 2)) to ``destination`` are possible: farther than
+        ``arrival_radius`` and in the same free component of the room."""
+        room = self.scenario.room
+        far = np.hypot(*(np.asarray(starts) - destination).T) > self.scenario.robot.arrival_radius
+        return far & (self._components[room.cell_index(starts)] == self._components[room.cell_index(destination)])
 
     def _option_points(self, options: dict[str, Any], key: str) -> np.ndarray | None:
         if key not in options or options[key] is None:

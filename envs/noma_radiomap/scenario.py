@@ -774,12 +774,12 @@ except ImportError:  # PyYAML built without libyaml
 
 class ScenarioLoader(_SafeLoader):
     """
-    PyYAML's safe loader with YAML 1.2 core-schema numbers (PyYAML's YAML 1.1 rules read ``15e3`` and ``1.0e9`` as
-    strings, ``010`` as 8 and ``1:00`` as 60; here they are 15000.0, 1e9, 10 and a string; ``0o10`` is 8 and
-    ``0x10`` 16), merge keys (``<<: *base``), duplicate keys refused, nesting limited to :data:`MAX_NESTING` and
-    the number of values, aliases expanded (a list used through 1000 aliases counts 1000 times), to
-    :data:`MAX_NODES`; recursive aliases are refused. The counts are made while the file is composed, before any
-    Python object is built.
+    PyYAML's safe loader with YAML 1.2 core-schema numbers and booleans (PyYAML's YAML 1.1 rules read ``15e3`` and
+    ``1.0e9`` as strings, ``010`` as 8, ``1:00`` as 60 and ``no`` as False; here they are 15000.0, 1e9, 10 and
+    strings; ``0o10`` is 8, ``0x10`` 16, ``true`` and ``false`` the booleans), merge keys (``<<: *base``),
+    duplicate keys refused, nesting limited to :data:`MAX_NESTING` and the number of values, aliases expanded (a
+    list used through 1000 aliases counts 1000 times), to :data:`MAX_NODES`; recursive aliases are refused. The
+    counts are made while the file is composed, before any Python object is built.
     """
 
     def flatten_mapping(self, node: yaml.MappingNode) -> None:
@@ -839,14 +839,20 @@ class NodeLimitError(yaml.composer.ComposerError):
     """A scenario file holds more than :data:`MAX_NODES` values once its aliases are expanded."""
 
 
+class IntegerRangeError(yaml.constructor.ConstructorError):
+    """A scenario file holds an integer longer than Python converts from text (``sys.get_int_max_str_digits``)."""
+
+
 _MERGE_TAG = "tag:yaml.org,2002:merge"
-_INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
-# YAML 1.2 core schema numbers replace PyYAML's YAML 1.1 ones: its ints read ``010`` as octal 8, ``1:00`` as
-# sexagesimal 60 and ``0b10`` as binary, its floats need a dot and a signed exponent and read ``1:30.0`` as 5430.0.
+_INT_TAG, _FLOAT_TAG, _BOOL_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.org,2002:bool"
+# YAML 1.2 core schema numbers and booleans replace PyYAML's YAML 1.1 ones: its ints read ``010`` as octal 8,
+# ``1:00`` as sexagesimal 60 and ``0b10`` as binary, its floats need a dot and a signed exponent and read ``1:30.0``
+# as 5430.0, its booleans include ``yes``, ``no``, ``on``, ``off`` (a room named ``NO`` was False).
 ScenarioLoader.yaml_implicit_resolvers = {
-    first: [(tag, regexp) for tag, regexp in resolvers if tag not in (_INT_TAG, _FLOAT_TAG)]
+    first: [(tag, regexp) for tag, regexp in resolvers if tag not in (_INT_TAG, _FLOAT_TAG, _BOOL_TAG)]
     for first, resolvers in yaml.resolver.Resolver.yaml_implicit_resolvers.items()
 }
+ScenarioLoader.add_implicit_resolver(_BOOL_TAG, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
 # Decimal (``_`` may group digits, as in the floats), ``0o`` octal and ``0x`` hexadecimal integers.
 ScenarioLoader.add_implicit_resolver(
     _INT_TAG, re.compile(r"^(?:[-+]?[0-9][0-9_]*|0o[0-7]+|0x[0-9a-fA-F]+)$"), list("-+0123456789")
@@ -870,7 +876,11 @@ def _construct_int(loader: ScenarioLoader, node: yaml.ScalarNode) -> int:
     text = str(loader.construct_scalar(node)).replace("_", "")
     try:
         return int(text, 0) if text.startswith(("0o", "0x")) else int(text, 10)
-    except ValueError:  # a scalar tagged ``!!int`` that is not one
+    except ValueError:  # a scalar tagged ``!!int`` that is not one, or longer than Python converts
+        if re.fullmatch(r"[-+]?[0-9]+", text):
+            raise IntegerRangeError(
+                None, None, f"an integer of {len(text.lstrip('+-')):,} digits is out of range", node.start_mark
+            ) from None
         raise yaml.constructor.ConstructorError(
             None, None, f"expected an integer, got {_quote(node.value)}", node.start_mark
         ) from None
@@ -892,7 +902,7 @@ def _read_yaml(content: bytes, source: str) -> Any:
         mark = getattr(error, "problem_mark", None) or getattr(error, "context_mark", None)
         where = f"{source}, line {mark.line + 1}, column {mark.column + 1}" if mark is not None else source
         problem = getattr(error, "problem", None) or str(error)
-        kind = "" if isinstance(error, NodeLimitError) else "malformed YAML: "
+        kind = "" if isinstance(error, NodeLimitError | IntegerRangeError) else "malformed YAML: "
         raise ValueError(f"{where}: {kind}{problem}") from None
     except RecursionError:
         raise ValueError(f"{source}: malformed YAML: nested too deeply") from None

@@ -30,7 +30,8 @@ class RelativeGoalObservation(gym.ObservationWrapper, gym.utils.RecordConstructo
     def __init__(self, env: gym.Env, distance_scale: float = DISTANCE_SCALE) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, distance_scale=distance_scale)
         gym.ObservationWrapper.__init__(self, env)
-        if not np.isfinite(distance_scale) or distance_scale <= 0:
+        real = isinstance(distance_scale, int | float | np.integer | np.floating) and not isinstance(distance_scale, bool)
+        if not real or not np.isfinite(distance_scale) or distance_scale <= 0:
             raise ValueError(f"distance_scale must be a finite number > 0, got {distance_scale!r}")
         self.distance_scale = float(distance_scale)
         self.n_robots = int(env.unwrapped.n_robots)
