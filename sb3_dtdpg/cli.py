@@ -509,13 +509,22 @@ def _run_options(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
-def _saved_model_env(args: argparse.Namespace, channel: str) -> tuple[Any, Any, dict[str, Any]]:
-    """The saved model of ``evaluate``/``enjoy``, its test env (its recorded settings unless overridden) and the settings."""
+def _saved_model_env(
+    args: argparse.Namespace, channel: str, outputs: dict[str, str | None]
+) -> tuple[Any, Any, dict[str, Any]]:
+    """
+    The saved model of ``evaluate``/``enjoy``, its test env (its recorded settings unless overridden, its observations
+    normalized as it trained on them) and the settings.
+
+    :param args: the command's options
+    :param channel: the test env's channel
+    :param outputs: the command's output files by option, refused where one is the scenario file the env is built from
+    """
     import gymnasium as gym
 
-    import noma_radiomap  # noqa: F401  (registers the env ids)
+    import noma_radiomap  # registers the env ids
     from sb3_dtdpg.baselines import is_mission_env
-    from sb3_dtdpg.model_files import read_saved_model
+    from sb3_dtdpg.model_files import check_not_input, read_saved_model
 
     with _user_errors(args):
         saved = read_saved_model(args.model, args.algo)
@@ -532,13 +541,20 @@ def _saved_model_env(args: argparse.Namespace, channel: str) -> tuple[Any, Any, 
             multiple_access=args.multiple_access or implied.get("multiple_access"),
             task=implied.get("task"),
         )
+        scenario = kwargs.get("scenario")
+        scenario_file = None if scenario is None or str(scenario) in noma_radiomap.list_scenarios() else scenario
+        for option, value in outputs.items():
+            if value is not None:
+                check_not_input(option, value, scenario_file, "the scenario file of the test env")
         env = gym.make(env_id, **kwargs)
         try:
+            env = saved.observations_as_trained(env)
             model = saved.load(env)
         except ValueError:
             env.close()
             raise
-    return model, env, {**settings, **kwargs, "env_id": env_id, "algo": saved.algo}
+    normalized = {} if saved.normalization is None else {"observation_statistics": str(saved.normalization)}
+    return model, env, {**settings, **kwargs, "env_id": env_id, "algo": saved.algo, **normalized}
 
 
 def _env_id_settings(args: argparse.Namespace, saved: Any) -> dict[str, Any]:
@@ -596,7 +612,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from sb3_dtdpg.experiments import tables
 
     _check_output_files(args, {"--json": args.json, "--csv": args.csv})
-    model, env, settings = _saved_model_env(args, args.channel)
+    model, env, settings = _saved_model_env(args, args.channel, {"--json": args.json, "--csv": args.csv})
     # The episode returns on the reward the model trained on last, as its run's own evaluation (the MQI is the same)
     phase = final_reward_phase(model, settings["algo"])
     if phase is not None and hasattr(env.unwrapped, "set_reward_phase"):
@@ -635,8 +651,9 @@ def _cmd_enjoy(args: argparse.Namespace) -> int:
                 animation_writer(args.record, args.fps)  # .mp4 needs ffmpeg: say so before the mission runs
             except ValueError as error:
                 raise ValueError(f"--record {error}") from None
-    model, env, settings = _saved_model_env(args, args.channel)
-    trace = run_mission(model, env, args.seed)
+    model, env, settings = _saved_model_env(args, args.channel, {"--record": args.record})
+    with _user_errors(args):
+        trace = run_mission(model, env, args.seed)
     info = trace.info
     arrived = "all robots arrived" if info.get("is_success") else "not all robots arrived"
     outage = [int(steps) for steps in info.get("outage_steps", [])]

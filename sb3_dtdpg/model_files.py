@@ -16,10 +16,19 @@ import os
 from pathlib import Path
 from typing import Any
 
-from sb3_dtdpg.env_settings import CHECKED, builtin_scenario_digest, check_settings, scenario_digest
+import numpy as np
+
+from sb3_dtdpg.env_settings import (
+    CHECKED,
+    RETIRED_BUILTINS,
+    builtin_scenario_digest,
+    check_settings,
+    describe_scenario,
+    scenario_digest,
+)
 from sb3_dtdpg.experiments.storage import RUN_RECORDS
 
-__all__ = ["RUN_RECORDS", "SavedModel", "check_output_file", "read_saved_model"]
+__all__ = ["RUN_RECORDS", "SavedModel", "check_not_input", "check_output_file", "read_saved_model"]
 
 #: The algorithm of a policy class name (SB3 stores the policy class in the zip).
 _POLICY_ALGOS = {"DTDPGPolicy": "dtdpg", "TD3Policy": "td3", "SACPolicy": "sac", "TQCPolicy": "tqc"}
@@ -39,6 +48,7 @@ class SavedModel:
     :param env_id: the env id it was trained on, where known
     :param source: where the settings come from, for messages
     :param custom_objects: saved attributes to replace on loading (SB3's ``custom_objects``)
+    :param normalization: the RL Zoo's ``vecnormalize.pkl`` of the model (its observation statistics), None: none
     """
 
     def __init__(
@@ -49,9 +59,11 @@ class SavedModel:
         env_id: str | None,
         source: str,
         custom_objects: dict[str, Any] | None = None,
+        normalization: Path | None = None,
     ) -> None:
         self.path, self.algo, self.settings, self.env_id, self.source = path, algo, settings, env_id, source
         self.custom_objects = dict(custom_objects or {})
+        self.normalization = normalization
 
     def env_kwargs(self, channel: str, **overrides: Any) -> dict[str, Any]:
         """
@@ -93,6 +105,11 @@ class SavedModel:
         if name is not None and builtin_scenario_digest(str(name)) == digest:
             return str(name)
         recorded = f"content sha256 {digest[:12]}, recorded in {self.source}"
+        if not file and digest in RETIRED_BUILTINS:
+            raise ValueError(
+                f"the model {self.path} was trained on scenario {name!r}: {describe_scenario(settings)}; give "
+                f"--scenario {RETIRED_BUILTINS[digest]} (its path in a clone of the repository)"
+            )
         if not file:
             raise ValueError(
                 f"the model {self.path} was trained on a scenario {name!r} of its own ({recorded}), not the built-in "
@@ -119,7 +136,7 @@ class SavedModel:
         # verbose 0: a model saved with verbose=1 (the RL Zoo's) would print SB3's env-wrapping notice on load
         custom_objects = {"verbose": 0, **self.custom_objects}
         try:
-            return load_model(self.algo, self.path, env=env, device="cpu", custom_objects=custom_objects)
+            model = load_model(self.algo, self.path, env=env, device="cpu", custom_objects=custom_objects)
         except ValueError as error:
             if self.settings or "spaces do not match" not in str(error):
                 raise
@@ -128,6 +145,56 @@ class SavedModel:
                 f"{error}: the model {self.path} records no NomaRadioMap settings; if it was not trained on a mission "
                 "env, evaluate and enjoy cannot test it (they run the NomaRadioMap test missions)"
             ) from None
+        broken = [name for name, value in model.policy.state_dict().items() if not value.isfinite().all()]
+        if broken:
+            raise ValueError(
+                f"the model {self.path} holds non-finite weights (NaN or inf) in {', '.join(broken[:3])}"
+                f"{' and more' if len(broken) > 3 else ''}: it was saved after its training diverged"
+            )
+        return model
+
+    def observations_as_trained(self, env: Any) -> Any:
+        """
+        :param env: the model's test env (a Gymnasium env)
+        :return: ``env`` with its observations normalized by the model's RL Zoo statistics (``normalize: true``
+            trains the model on normalized observations), or ``env`` itself for a model without them
+        :raises ValueError: naming the statistics file when it cannot be read
+        """
+        if self.normalization is None:
+            return env
+        import pickle
+
+        import gymnasium as gym
+        from stable_baselines3.common.running_mean_std import RunningMeanStd
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        try:
+            with open(self.normalization, "rb") as file:
+                statistics = pickle.load(file)
+        except Exception as error:  # a damaged pickle raises many kinds of errors
+            raise ValueError(f"{self.normalization}: unreadable ({type(error).__name__}: {error})") from None
+        if not isinstance(statistics, VecNormalize) or not isinstance(statistics.__dict__.get("obs_rms"), RunningMeanStd):
+            raise ValueError(f"{self.normalization}: not the RL Zoo's VecNormalize statistics of a flat observation")
+        if not statistics.norm_obs:  # rewards only
+            return env
+        return gym.wrappers.TransformObservation(env, _Normalizer(statistics), env.observation_space)
+
+
+class _Normalizer:
+    """
+    ``VecNormalize.normalize_obs`` of saved statistics, without the ``VecNormalize`` (which has no env once
+    unpickled, and then cannot be copied with the test env).
+
+    :param statistics: the unpickled ``VecNormalize``
+    """
+
+    def __init__(self, statistics: Any) -> None:
+        self.obs_rms, self.clip_obs, self.epsilon = statistics.obs_rms, statistics.clip_obs, statistics.epsilon
+
+    def __call__(self, observation: Any) -> Any:
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        return VecNormalize._normalize_obs(self, observation, self.obs_rms).astype(np.float32)  # type: ignore[arg-type]
 
 
 def _model_path(path: str | Path) -> Path:
@@ -156,10 +223,15 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
 
     path = _model_path(path)
     try:
-        data, _, _ = load_from_zip_file(path, load_data=True, device="cpu")
+        data, parameters, _ = load_from_zip_file(path, load_data=True, device="cpu")
     except Exception as error:  # zipfile, pickle and torch raise many kinds of errors for a file that is not a model
         raise ValueError(f"{path}: not a Stable-Baselines3 model file ({type(error).__name__}: {error})") from None
-    data = data or {}
+    if not data or "policy" not in (parameters or {}):
+        missing = "data" if not data else "policy.pth"
+        raise ValueError(
+            f"{path}: not a Stable-Baselines3 model file (no {missing!r} in it; a policy alone, saved with "
+            "model.policy.save(), is not one: give the file of model.save())"
+        )
     result_file = path.parent / "result.json"
     spec, content = _run_spec(result_file) if result_file.is_file() else ({}, None)
     policy_class = getattr(data.get("policy_class"), "__name__", "")
@@ -189,7 +261,15 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
         # is ignored (the warning of DLR-RM/stable-baselines3#2275, which load trips). Left to SB3, it is rebuilt
         # the same way.
         custom_objects["replay_buffer_class"] = None
-    return SavedModel(path, algo, settings, spec.get("env_id"), source, custom_objects)
+    # the RL Zoo keeps a run's VecNormalize statistics in <run folder>/<env id>/vecnormalize.pkl, beside its models
+    statistics = sorted(path.parent.glob("*/vecnormalize.pkl"))
+    if len(statistics) > 1:
+        raise ValueError(
+            f"{path}: several observation statistics beside it ({', '.join(map(str, statistics))}); move the model "
+            "into its own RL Zoo run folder"
+        )
+    normalization = statistics[0] if statistics else None
+    return SavedModel(path, algo, settings, spec.get("env_id"), source, custom_objects, normalization)
 
 
 def _algorithm(
@@ -332,6 +412,20 @@ def check_output_file(option: str, value: str | Path, model: str | Path) -> None
             f"{option} {value}: {target.name} is a record of the run folder {target.parent} (train, compare "
             "and reproduce own it); write the results elsewhere"
         )
+
+
+def check_not_input(option: str, value: str | Path, source: str | Path | None, what: str) -> None:
+    """
+    Refuse an output file of ``evaluate``/``enjoy`` that is a file the command reads.
+
+    :param option: the option, for the message (``--json``)
+    :param value: the output file
+    :param source: the file read (None, or a name that is no file: nothing to refuse)
+    :param what: what that file is, for the message
+    :raises ValueError: naming the option and the file
+    """
+    if source is not None and Path(value).exists() and Path(source).is_file() and os.path.samefile(value, source):
+        raise ValueError(f"{option} {value}: that is {what}; write the results elsewhere")
 
 
 def _task_of(env_id: str | None) -> str | None:

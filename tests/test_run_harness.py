@@ -242,6 +242,20 @@ def test_a_damaged_checkpoint_model_is_a_named_error(tmp_path, monkeypatch):
     assert run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)["train"]["resumed_at_episode"] is None
 
 
+def test_a_checkpoint_of_any_algorithm_records_the_env_it_trains_on(tmp_path, monkeypatch):
+    # DDPG's own save records nothing: a checkpoint's model.zip was tested on the default room by evaluate/enjoy
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    _stop_after_first_checkpoint(monkeypatch)
+    spec = dataclasses.replace(SPEC, multiple_access="oma")
+    with pytest.raises(KeyboardInterrupt):
+        run_one(spec, tmp_path, resume=True, checkpoint_every=1)
+    (model,) = (tmp_path / "runs" / spec.run_id).glob("checkpoints/*/model.zip")
+    data, _, _ = load_from_zip_file(model)
+    settings = data["env_settings"]
+    assert (settings["scenario"], settings["multiple_access"], settings["observation"]) == ("small", "oma", "paper")
+
+
 def _stop_after_first_checkpoint(patch):
     """Make training raise ``KeyboardInterrupt`` right after its first checkpoint (``patch``: a monkeypatch)."""
     original = PeriodicCheckpoint._on_rollout_end

@@ -403,6 +403,8 @@ def _train_and_record(
     """The steps of :func:`run_one` once its folders are ready: build, train, save, evaluate, write the result."""
     run_dir = run_folder(out, spec)
     env, model, done_episodes = _build_model(spec, run_dir, checkpoint, identity, verbose)
+    # every algorithm's zip, its checkpoints' too, says what it was trained on (DTDPG's save does it too)
+    env_settings.record(model)
     start_timesteps = int(model.num_timesteps) if checkpoint is not None else 0  # learn() resets a new model's count
     model.set_logger(run_logger(tb_dir, verbose, start_timesteps if checkpoint is not None else None))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
@@ -411,7 +413,6 @@ def _train_and_record(
         train_s = _train(model, callbacks, total_timesteps, checkpoint is not None, progress_bar)
     except Exception as error:  # not KeyboardInterrupt: an interrupted run keeps its checkpoint
         raise _record_divergence(out, spec, identity, model, error) from error
-    env_settings.record(model)  # every algorithm's zip says what it was trained on (DTDPG's save does it too)
     atomic_write(run_dir / "model.zip", model.save)
     curriculum = getattr(model, "curriculum_state", None)
     if curriculum is not None:
