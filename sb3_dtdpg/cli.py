@@ -546,6 +546,15 @@ def _saved_model_env(
         for option, value in outputs.items():
             if value is not None:
                 check_not_input(option, value, scenario_file, "the scenario file of the test env")
+        guessed = [key for key in ("scenario", "multiple_access") if key not in settings and key not in kwargs]
+        if guessed and saved.source == "the observation length":
+            print(
+                f"sb3-dtdpg {args.command}: warning: the model {args.model} records no env settings (only its "
+                f"observation length tells its layout): testing it with {env_id}'s default "
+                f"{' and '.join(guessed)}; give {' and '.join('--' + key.replace('_', '-') for key in guessed)} if it "
+                "was trained on others",
+                file=sys.stderr,
+            )
         env = gym.make(env_id, **kwargs)
         try:
             env = saved.observations_as_trained(env)

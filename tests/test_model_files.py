@@ -128,3 +128,17 @@ def test_a_zoo_model_trained_on_normalized_observations_is_tested_on_them(small_
     (run / "NomaRadioMap-v0" / "vecnormalize.pkl").write_bytes(pickle.dumps([1, 2]))
     code = refused(["evaluate", str(run / "NomaRadioMap-v0.zip"), "--n-episodes", "1"])
     one_error_line(code, capsys.readouterr(), "not the RL Zoo's VecNormalize statistics of a flat observation")
+
+
+def test_a_model_recording_no_settings_is_tested_on_the_defaults_with_a_warning(tmp_path, capsys):
+    from stable_baselines3 import DDPG
+
+    bare = tmp_path / "bare.zip"  # SB3's own save: nothing but the observation length tells what it trained on
+    DDPG("MlpPolicy", gym.make("NomaRadioMap-v0", scenario="small"), learning_starts=10).save(bare)
+    assert main(["evaluate", str(bare), "--algo", "ddpg", "--n-episodes", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the model" in err and "records no env settings" in err
+    assert "give --scenario and --multiple-access if it was trained on others" in err
+    given = ["--scenario", "small", "--multiple-access", "noma"]
+    assert main(["evaluate", str(bare), "--algo", "ddpg", "--n-episodes", "1", *given]) == 0
+    assert "warning" not in capsys.readouterr().err
