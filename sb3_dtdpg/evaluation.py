@@ -257,7 +257,8 @@ def evaluate(
     :param channel: ``"rayleigh"`` (random fading, the paper's test setting; the default for an env id, unless
         ``env_kwargs`` names one) or ``"radio_map"``; with an env instance it must be ``None`` or match the env's
     :param multiple_access: ``"noma"`` or ``"oma"``; ``None`` keeps the env's
-    :param deterministic: passed to ``predict`` (no exploration noise)
+    :param deterministic: passed to ``predict``; DT-DPG's, DDPG's and TD3's actors are deterministic either way
+        (``predict`` adds no exploration noise), SAC's and TQC's sample their action when False
     :param options: ``reset`` options (fixed ``starts``/``destinations``), one dict for every episode or one per episode
     :param env_kwargs: extra ``gymnasium.make`` keyword arguments (with an env id only)
     :param return_trajectories: keep every episode's robot positions in ``result.trajectories``
