@@ -2,18 +2,35 @@
 
 ``sb3-dtdpg enjoy MODEL --record mission.gif`` uses it. It draws off-screen (matplotlib's Agg canvas, no
 display needed) and writes with matplotlib's own writers: ``.gif`` with ``PillowWriter`` (pillow comes with
-matplotlib), ``.mp4`` with ``FFMpegWriter`` (needs an ``ffmpeg`` program on the ``PATH``).
+matplotlib), ``.mp4`` with ``FFMpegWriter`` (needs an ``ffmpeg`` program on the ``PATH``). The file is written
+whole or not at all (:func:`sb3_dtdpg.common.files.atomic_write`): an error or Ctrl-C while it is written keeps the
+file that was there.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["MissionTrace", "animation_writer", "frame_steps", "record_mission", "run_mission", "save_animation"]
+from sb3_dtdpg.common.files import atomic_write
+
+__all__ = [
+    "GIF_MAX_FPS",
+    "MissionTrace",
+    "animation_writer",
+    "frame_steps",
+    "record_mission",
+    "run_mission",
+    "save_animation",
+]
+
+#: The most frames per second a ``.gif`` plays: its frame times are whole hundredths of a second, and browsers and
+#: most viewers play a frame of 1/100 s (or 0) for 1/10 s, so 2/100 s per frame is the shortest that plays as written.
+GIF_MAX_FPS = 50
 
 _ROBOT_COLORS = ("magenta", "cyan", "white", "lime", "pink", "deepskyblue")
 
@@ -64,14 +81,23 @@ def animation_writer(path: str | Path, fps: int = 10) -> Any:
     The matplotlib writer of a recording, checked before a mission runs (``.mp4`` needs ffmpeg).
 
     :param path: ``.gif`` or ``.mp4``
-    :param fps: frames per second
+    :param fps: frames per second: positive, for a ``.gif`` at most :data:`GIF_MAX_FPS` (a ``.gif`` of 30 fps
+        holds each frame 3/100 s: 33.3 fps)
     :return: a ``PillowWriter`` (``.gif``) or ``FFMpegWriter`` (``.mp4``)
-    :raises ValueError: another suffix, or ``.mp4`` without ffmpeg
+    :raises ValueError: another suffix, ``.mp4`` without ffmpeg, or an ``fps`` the file cannot play
     """
     from matplotlib import animation
 
     path = Path(path)
+    if not fps > 0:
+        raise ValueError(f"{path}: fps must be positive, got {fps!r}")
     if path.suffix.lower() == ".gif":
+        if fps > GIF_MAX_FPS:
+            raise ValueError(
+                f"{path}: fps must be at most {GIF_MAX_FPS} for a .gif, got {fps!r} (a .gif's frame times are whole "
+                "hundredths of a second, and viewers play frames shorter than 2/100 s at 10 fps); record a .mp4 for "
+                "more frames per second"
+            )
         return animation.PillowWriter(fps=fps)
     if path.suffix.lower() == ".mp4":
         if not animation.FFMpegWriter.isAvailable():
@@ -101,12 +127,14 @@ def save_animation(env: Any, trace: MissionTrace, path: str | Path, fps: int = 1
 
     :param env: the env the trace comes from (its radio map is the background)
     :param trace: see :func:`run_mission`
-    :param path: ``.gif`` or ``.mp4``
-    :param fps: frames per second
+    :param path: ``.gif`` or ``.mp4``, replaced only once the whole animation is written: on an error or
+        ``KeyboardInterrupt`` the file that was there is kept and no temporary file is left
+    :param fps: frames per second (:func:`animation_writer`)
     :param max_frames: at most this many frames (long missions show every k-th step; the last is always shown;
         one frame: the last step alone, :func:`frame_steps`)
     :return: the number of frames written
-    :raises ValueError: another suffix, ``.mp4`` without ffmpeg, or ``max_frames`` below 1
+    :raises ValueError: another suffix, ``.mp4`` without ffmpeg, an ``fps`` the file cannot play, or ``max_frames``
+        below 1
     """
     from matplotlib import animation
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -166,8 +194,19 @@ def save_animation(env: Any, trace: MissionTrace, path: str | Path, fps: int = 1
         )
 
     movie = animation.FuncAnimation(figure, draw, frames=frames, blit=False)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    movie.save(str(path), writer=writer)
+
+    def write(tmp: str) -> None:
+        # the writers pick the format from the suffix, and atomic_write's file ends in .tmp: the movie goes to a file
+        # of the suffix beside it, which then takes its place
+        movie_file = f"{tmp}{path.suffix}"
+        try:
+            movie.save(movie_file, writer=writer)
+            os.replace(movie_file, tmp)
+        except BaseException:
+            Path(movie_file).unlink(missing_ok=True)
+            raise
+
+    atomic_write(path, write)
     return len(frames)
 
 
