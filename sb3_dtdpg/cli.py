@@ -1014,7 +1014,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="write the mission as an animated .gif (or .mp4, needs ffmpeg): paths, power split, outage",
     )
-    p.add_argument("--fps", type=positive_int, default=10, help="frames per second of the recording (default: 10)")
+    p.add_argument("--fps", type=positive_int, default=10, help="frames per second (default: 10; at most 50 for a .gif)")
     p.add_argument(
         "--max-frames",
         type=positive_int,
