@@ -785,7 +785,11 @@ class _HelpFormatter(argparse.HelpFormatter):
             budgets = "; ".join(
                 f"{name}: {BUDGETS[name].episodes} episodes on {BUDGETS[name].scenario or 'mall'}, "
                 f"{BUDGETS[name].seeds} seed{'s' if BUDGETS[name].seeds != 1 else ''}"
-                + (" (the paper's scale: --budget paper, hours on 2 cores; docs/RESULTS.md)" if name == "paper" else "")
+                + (
+                    " (the paper's scale: compare 15-30 min on 2 cores, reproduce longer; docs/RESULTS.md)"
+                    if name == "paper"
+                    else ""
+                )
                 for name in PUBLIC_BUDGETS
             )
             text = text.replace("%(budgets)s", budgets)
