@@ -317,6 +317,39 @@ def test_save_load_continue_matches_uninterrupted_run(algo, tmp_path):
     assert not states_equal(policy_state(restarted), policy_state(reference))
 
 
+class SaveAt(BaseCallback):
+    """Saves the model and its replay buffer at step ``t``, after the curriculum ran (as a CheckpointCallback would)."""
+
+    def __init__(self, t, folder):
+        super().__init__()
+        self.t, self.folder = t, folder
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps == self.t:
+            self.model.save(self.folder / "model.zip")
+            self.model.save_replay_buffer(self.folder / "buffer.pkl")
+        return True
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_a_model_saved_at_the_transfer_step_relabels_its_replay_when_it_resumes(algo, tmp_path):
+    # The relabelling waits until SB3 has stored the transfer step's transitions: a save in that step (e.g. a
+    # CheckpointCallback whose save_freq is the phase's budget) held the old phase's rewards, and resumed on them
+    phases = two_phases(replay_handling="relabel")
+    model, curriculum = make_model(algo, make_env(), phases, replay_buffer_class=RewardComponentsReplayBuffer)
+    learn(model, curriculum, 61, [SaveAt(60, tmp_path)])
+    reference = model.replay_buffer
+    resumed = type(model).load(tmp_path / "model.zip", env=make_env(), device="cpu")
+    resumed.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert resumed.curriculum_state["phase_index"] == 1 and resumed.replay_buffer.pos == 59
+    _, curriculum = make_model(algo, resumed.get_env(), phases)
+    learn(resumed, curriculum, 1, reset_num_timesteps=False)
+    np.testing.assert_array_equal(resumed.replay_buffer.rewards[:59], reference.rewards[:59])
+    components = reference.reward_components[:59, 0]
+    np.testing.assert_allclose(reference.rewards[:59, 0], components @ W["mqi"], rtol=1e-6)
+    assert "pending_replay" not in resumed.curriculum_state and "pending_replay" not in model.curriculum_state
+
+
 def test_resume_with_other_phases_is_refused():
     model, curriculum = make_model(DDPG, make_env(), two_phases())
     learn(model, curriculum, 20)

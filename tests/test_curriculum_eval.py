@@ -84,3 +84,31 @@ def test_an_eval_env_without_reward_phases_is_an_error(tmp_path):
     model = DTDPG("MlpPolicy", make_env(), phases=PHASES, learning_starts=10, policy_kwargs={"net_arch": [16]})
     with pytest.raises(ValueError, match="eval env of EvalCallback has no set_reward_phase"):
         model.learn(40, callback=pendulum)
+
+
+def test_an_evaluation_inside_another_callback_follows_the_reward_phase(tmp_path):
+    # EveryNTimesteps (an EventCallback) around an EvalCallback, and one as another's callback_on_new_best: both
+    # evaluated the destination reward after the transfer
+    from stable_baselines3.common.callbacks import EveryNTimesteps
+
+    kwargs = {"learning_starts": 10, "batch_size": 16, "policy_kwargs": {"net_arch": [16]}, "seed": 0}
+    inner, recorder = evaluation(tmp_path, "inner")
+    inner.eval_freq = 1
+    on_best = EvalCallback(make_env(), eval_freq=1, n_eval_episodes=1)
+    outer = EvalCallback(make_env(), eval_freq=20, n_eval_episodes=1, callback_on_new_best=on_best)
+    model = DTDPG("MlpPolicy", make_env(), phases=PHASES, **kwargs)
+    model.learn(120, callback=[EveryNTimesteps(20, inner), outer])
+    assert recorder.phases == [(t, "destination" if t < TRANSFER_STEP else "mqi") for t in range(20, 121, 20)]
+    assert on_best.eval_env.get_attr("reward_phase") == ["mqi"]
+
+
+@pytest.mark.parametrize("nested", [False, True])
+def test_dtdpg_refuses_a_curriculum_callback_of_its_own(nested):
+    # DTDPG adds its own: a second one counted every step twice (phase 0 ended at half its budget)
+    from stable_baselines3.common.callbacks import CallbackList
+
+    model = DTDPG("MlpPolicy", make_env(), phases=PHASES, learning_starts=10, batch_size=16, seed=0)
+    extra = CurriculumTransferCallback(PHASES)
+    with pytest.raises(ValueError, match=r"callback: DTDPG runs its own CurriculumTransferCallback"):
+        model.learn(40, callback=CallbackList([extra]) if nested else extra)
+    assert model.num_timesteps == 0

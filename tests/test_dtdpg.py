@@ -2,6 +2,7 @@
 
 import inspect
 import os
+import re
 import warnings
 
 import gymnasium as gym
@@ -196,6 +197,24 @@ def test_save_load(tmp_path):
     # loaded model trains on
     loaded.learn(60, reset_num_timesteps=False)
     assert loaded.num_timesteps == 510
+
+
+def test_a_replay_buffer_of_other_returns_is_refused(tmp_path):
+    # A buffer computing 3-step returns with gamma 0.9 samples discounts 0.729, which the targets use: loaded into a
+    # model of one-step returns with gamma 0.99 it trained on the buffer's returns without a word
+    source = DTDPG("MlpPolicy", "Pendulum-v1", n_steps=3, gamma=0.9, **{**TINY, "learning_starts": 10})
+    source.learn(30)
+    source.save(tmp_path / "model.zip")
+    source.save_replay_buffer(tmp_path / "buffer.pkl")
+    for settings, named in (({"n_steps": 1, "gamma": 0.99}, "n_steps 3 (the model's: 1)"), ({"gamma": 0.99}, "gamma 0.9 ")):
+        model = DTDPG.load(tmp_path / "model.zip", env=gym.make("Pendulum-v1"), **settings)
+        own = model.replay_buffer
+        with pytest.raises(ValueError, match=re.escape(named)):
+            model.load_replay_buffer(tmp_path / "buffer.pkl")
+        assert model.replay_buffer is own
+    same = DTDPG.load(tmp_path / "model.zip", env=gym.make("Pendulum-v1"))
+    same.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert same.replay_buffer.pos == 30
 
 
 def test_save_load_replay_buffer(tmp_path):

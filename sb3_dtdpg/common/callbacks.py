@@ -45,13 +45,16 @@ class CurriculumTransferCallback(BaseCallback):
     The curriculum state lives in ``model.curriculum_state`` (a plain dict: phase index, episodes and steps done
     in the phase, recent successes, the history of phases), so ``model.save`` saves it with the action noise and
     its schedule: ``Model.load(path, env)`` then ``learn(..., callback=CurriculumTransferCallback(same phases))``
-    resumes in the same phase, and repeated ``learn()`` calls continue the curriculum. Loading a
+    resumes in the same phase (a :class:`sb3_dtdpg.DTDPG` runs its own: ``DTDPG.load(path, env).learn(...)``), and
+    repeated ``learn()`` calls continue the curriculum. A model saved at a transfer step, before the replay is
+    relabelled (e.g. by SB3's ``CheckpointCallback``), relabels the replay buffer loaded with it when it resumes. Loading a
     ``phase_<k>_<name>.zip`` checkpoint and training goes on with phase k + 1.
 
     Evaluation follows the curriculum: the eval envs of ``eval_callbacks`` (SB3 ``EvalCallback`` objects) switch
     reward phase with the training env, so each evaluation measures the reward being trained, and at each
     transfer their best mean reward is reset, so ``best_model.zip`` is the best model on the last phase's reward.
-    ``DTDPG.learn`` passes the ``EvalCallback`` objects among its callbacks.
+    ``DTDPG.learn`` passes the ``EvalCallback`` objects among its callbacks, also those inside other callbacks
+    (``CallbackList``, ``EveryNTimesteps``, an ``EvalCallback``'s ``callback_on_new_best``).
 
     Logged: ``curriculum/phase`` (index), ``curriculum/noise_sigma``, ``curriculum/episodes_in_phase`` at every
     step (written at SB3's log dumps); a line per transfer with ``verbose >= 1``.
@@ -155,6 +158,9 @@ class CurriculumTransferCallback(BaseCallback):
                 self._set_env_phase(self.phase)
                 if self.model.action_noise is None:
                     self._arm_noise(self.phase)
+                if state.get("pending_replay"):  # saved at the transfer step, before the relabelling
+                    self._pending_replay = self.phase
+                    self._apply_pending_replay()
             elif self.phase_index + 1 < len(self.phases):
                 # Trained from a phase checkpoint: the transfer it marks has not been applied yet
                 self._enter_phase(self.phase_index + 1, defer_replay=False)
@@ -253,6 +259,9 @@ class CurriculumTransferCallback(BaseCallback):
             self.model.replay_buffer.reset()  # type: ignore[attr-defined]
         if phase.replay_handling != "keep":
             self._pending_replay = phase
+            # in the saved state too: a model saved before it is applied (a CheckpointCallback at the transfer step)
+            # applies it when it resumes
+            self.state["pending_replay"] = True
             if not defer_replay:
                 self._apply_pending_replay()
         if self.verbose >= 1:
@@ -266,6 +275,7 @@ class CurriculumTransferCallback(BaseCallback):
         phase, self._pending_replay = self._pending_replay, None
         if phase is None:
             return
+        self.state.pop("pending_replay", None)
         buffer = self.model.replay_buffer  # type: ignore[attr-defined]
         if hasattr(buffer, "relabel") and phase.reward_phase is not None and self.training_env.has_attr("reward_weights"):
             weights = self.training_env.env_method("reward_weights", phase.reward_phase, indices=[0])[0]

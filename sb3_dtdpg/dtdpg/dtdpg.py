@@ -1,6 +1,6 @@
 import dataclasses
 import warnings
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from typing import Any, ClassVar, TypeVar
 
 import torch as th
@@ -316,6 +316,11 @@ class DTDPG(LeanStep, DDPG):
                 if not isinstance(user_callback, BaseCallback):
                     user_callback = ConvertCallback(user_callback)
                 user_callbacks.append(user_callback)
+        if any(isinstance(c, CurriculumTransferCallback) for c in _all_callbacks(user_callbacks)):
+            raise ValueError(
+                "callback: DTDPG runs its own CurriculumTransferCallback (from its phases); a second one would count "
+                "every step twice: give the phases to DTDPG(phases=...) or DTDPG.load(..., phases=...) instead"
+            )
         curriculum = CurriculumTransferCallback(
             self.phases,
             save_path=self.curriculum_save_path,
@@ -360,8 +365,9 @@ class DTDPG(LeanStep, DDPG):
     def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
         """
         SB3's ``load_replay_buffer``, refusing a buffer of another observation or action space or another number of
-        envs (it would fail at the next stored transition with a bare broadcast error); the model's buffer is then
-        kept.
+        envs (it would fail at the next stored transition with a bare broadcast error), or one computing returns of
+        other ``n_steps`` or ``gamma`` than the model's (its targets would follow the buffer's); the model's buffer is
+        then kept.
 
         :param path: the pickled replay buffer
         :param truncate_last_traj: see SB3 (``HerReplayBuffer`` only)
@@ -370,15 +376,17 @@ class DTDPG(LeanStep, DDPG):
         previous = getattr(self, "replay_buffer", None)
         super().load_replay_buffer(path, truncate_last_traj)
         buffer = self.replay_buffer
-        differences = [
-            f"{name} {got} (the model's: {want})"
-            for name, got, want in (
-                ("observation space", buffer.observation_space, self.observation_space),
-                ("action space", buffer.action_space, self.action_space),
-                ("number of envs", buffer.n_envs, self.n_envs if self.env is not None else buffer.n_envs),
-            )
-            if got != want
+        compared = [
+            ("observation space", buffer.observation_space, self.observation_space),
+            ("action space", buffer.action_space, self.action_space),
+            ("number of envs", buffer.n_envs, self.n_envs if self.env is not None else buffer.n_envs),
         ]
+        if getattr(self, "_buffer_follows_returns", False):
+            # a buffer that computes returns samples their discounts, which the targets use instead of the model's
+            compared.append(("n_steps", getattr(buffer, "n_steps", 1), self.n_steps))
+            if hasattr(buffer, "gamma"):
+                compared.append(("gamma", buffer.gamma, self.gamma))
+        differences = [f"{name} {got} (the model's: {want})" for name, got, want in compared if got != want]
         if differences:
             self.replay_buffer = previous
             raise ValueError(f"the replay buffer {path} does not fit this model: {'; '.join(differences)}")
@@ -434,16 +442,29 @@ def _check_buffer_returns(owner: str, buffer_kwargs: Mapping[str, Any] | None, r
 _SWITCHES = ("optimize_memory_usage", "reinitialize_at_transfer", "lean", "backprop")
 
 
+def _all_callbacks(callbacks: Iterable[BaseCallback]) -> Iterator[BaseCallback]:
+    """
+    :param callbacks: callbacks given to ``learn``
+    :return: each of them and those they call: a ``CallbackList``'s, an ``EventCallback``'s ``callback``
+        (``EveryNTimesteps``) and an ``EvalCallback``'s ``callback_on_new_best`` and ``callback_after_eval``, each once
+    """
+    seen: set[int] = set()
+    pending = list(callbacks)
+    while pending:
+        callback = pending.pop(0)
+        if id(callback) in seen:
+            continue
+        seen.add(id(callback))
+        yield callback
+        inner = list(callback.callbacks) if isinstance(callback, CallbackList) else []
+        inner += [getattr(callback, name, None) for name in ("callback", "callback_on_new_best", "callback_after_eval")]
+        pending = [c for c in inner if isinstance(c, BaseCallback)] + pending
+
+
 def _curriculum_evaluations(callbacks: list[BaseCallback]) -> list[EvalCallback]:
     """
-    The ``EvalCallback`` objects (also inside ``CallbackList`` objects) whose eval env follows the curriculum's reward phase.
-    Optuna's trial callbacks (the RL Zoo's ``TrialEvalCallback``, which has a ``trial``) keep their env's reward:
-    a search compares trials on one objective, also those that never reach the last phase.
+    The ``EvalCallback`` objects (also inside other callbacks, :func:`_all_callbacks`) whose eval env follows the
+    curriculum's reward phase. Optuna's trial callbacks (the RL Zoo's ``TrialEvalCallback``, which has a ``trial``)
+    keep their env's reward: a search compares trials on one objective, also those that never reach the last phase.
     """
-    found: list[EvalCallback] = []
-    for callback in callbacks:
-        if isinstance(callback, CallbackList):
-            found += _curriculum_evaluations(callback.callbacks)
-        elif isinstance(callback, EvalCallback) and not hasattr(callback, "trial"):
-            found.append(callback)
-    return found
+    return [c for c in _all_callbacks(callbacks) if isinstance(c, EvalCallback) and not hasattr(c, "trial")]
