@@ -121,6 +121,12 @@ def test_missing_components_name_the_key():
     assert buffer.size() == 0  # nothing half-written
 
 
+def test_component_keys_as_one_string_are_refused():
+    # a string is a sequence: "time" was taken as the keys t, i, m, e, failing only at the first add
+    with pytest.raises(ValueError, match=r"component_keys must be a sequence of names, got the string 'time'"):
+        make_buffer(component_keys="time")
+
+
 def test_clear_empties():
     buffer = make_buffer()
     add_transitions(buffer, 3, np.random.default_rng(2))

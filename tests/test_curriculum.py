@@ -350,6 +350,14 @@ def test_a_model_saved_at_the_transfer_step_relabels_its_replay_when_it_resumes(
     assert "pending_replay" not in resumed.curriculum_state and "pending_replay" not in model.curriculum_state
 
 
+def test_the_reinitialisation_switch_of_the_callback_is_a_bool():
+    # "no" counted as on: the ablation re-created the networks at every transfer
+    with pytest.raises(
+        ValueError, match=r"CurriculumTransferCallback: reinitialize_at_transfer must be True or False, got 'no'"
+    ):
+        CurriculumTransferCallback(two_phases(), reinitialize_at_transfer="no")
+
+
 def test_resume_with_other_phases_is_refused():
     model, curriculum = make_model(DDPG, make_env(), two_phases())
     learn(model, curriculum, 20)

@@ -188,6 +188,8 @@ class RewardComponentsReplayBuffer(ReplayBuffer):
             self._set_component_keys(component_keys)
 
     def _set_component_keys(self, component_keys: Sequence[str]) -> None:
+        if isinstance(component_keys, str):  # a sequence too: "time" would be the keys t, i, m, e
+            raise ValueError(f"component_keys must be a sequence of names, got the string {component_keys!r}")
         component_keys = tuple(component_keys)
         if not component_keys or len(set(component_keys)) != len(component_keys):
             raise ValueError(f"component_keys must be non-empty and unique, got {component_keys!r}")

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
-from sb3_dtdpg.common.checks import check_folder
+from sb3_dtdpg.common.checks import check_folder, check_switches
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files, safe_name
 from sb3_dtdpg.common.noise import decaying_noise, noise_sigma, rearm_noise
 from sb3_dtdpg.common.phases import Phase, check_env_phases, parse_phases
@@ -80,6 +80,7 @@ class CurriculumTransferCallback(BaseCallback):
     ):
         super().__init__(verbose=verbose)
         check_folder("CurriculumTransferCallback", "save_path", save_path)
+        check_switches("CurriculumTransferCallback", {"reinitialize_at_transfer": reinitialize_at_transfer})
         self.phases = parse_phases(phases)
         self.eval_callbacks = list(eval_callbacks)
         self._ended_training = False  # set when the last phase's budget ends training
