@@ -8,10 +8,12 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from stable_baselines3 import DDPG
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import VecNormalize
 
 from noma_radiomap.planners import ShortestPathPlanner
 from noma_radiomap.propagation import dbm_to_watt
 from noma_radiomap.wrappers import RelativeGoalObservation, power_shares
+from sb3_dtdpg import DTDPG
 from sb3_dtdpg.common.buffers import RewardComponentsReplayBuffer
 from sb3_dtdpg.common.demonstrations import DemonstrationCallback
 from sb3_dtdpg.vec_env import make_mission_vec_env
@@ -124,6 +126,92 @@ def test_demonstrations_need_one_env():
         model.learn(4, callback=DemonstrationCallback(ShortestPathPlanner(), n_episodes=1))
     with pytest.raises(ValueError, match="n_episodes"):
         DemonstrationCallback(ShortestPathPlanner(), n_episodes=0)
+
+
+def test_demonstrations_seed_a_model_once_also_across_learn_calls_and_save_load(tmp_path):
+    env = make_vec_env(lambda: _small(), n_envs=1, seed=0)
+    model = DTDPG("MlpPolicy", env, learning_starts=10_000, policy_kwargs=dict(net_arch=[8]), seed=0)
+    demos = DemonstrationCallback(ShortestPathPlanner(), n_episodes=2)
+    model.learn(5, callback=demos)
+    seeded = demos.transitions
+    assert seeded > 0 and model.replay_buffer.pos == seeded + 5
+    model.learn(5, callback=demos)  # reset_num_timesteps=True, the default: was seeded a second time
+    assert model.replay_buffer.pos == seeded + 10 and demos.transitions == seeded
+    model.save(tmp_path / "model.zip")
+    loaded = DTDPG.load(tmp_path / "model.zip", env=env)
+    other = DemonstrationCallback(ShortestPathPlanner(), n_episodes=2)
+    loaded.learn(5, callback=other)
+    assert other.transitions == 0 and loaded.replay_buffer.pos == 5
+
+
+class _Overshooting(ShortestPathPlanner):
+    """The shortest path planner asking for 1.5 times its motion, beyond the action space: the env clips it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.actions: list[np.ndarray] = []
+
+    def act(self, env: gym.Env, observation: np.ndarray) -> np.ndarray:
+        action = np.array(super().act(env, observation), dtype=np.float32)
+        action[0::3] *= 1.5
+        self.actions.append(action)
+        return action
+
+
+def test_demonstrated_actions_are_stored_as_the_env_executed_them():
+    env = make_vec_env(lambda: _small(), n_envs=1, seed=0)
+    model = DDPG("MlpPolicy", env, learning_starts=10_000, policy_kwargs=dict(net_arch=[8]), seed=0)
+    planner = _Overshooting()
+    demos = DemonstrationCallback(planner, n_episodes=1)
+    model.learn(1, callback=demos)
+    asked = np.array(planner.actions)
+    space = model.action_space
+    assert (asked > space.high).any()  # the planner did overshoot
+    stored = model.replay_buffer.actions[: demos.transitions, 0]
+    # what SB3 stores for an executed action: the clipped action scaled to [-1, 1] (was: 1.5 times the motion)
+    np.testing.assert_array_equal(stored, model.policy.scale_action(np.clip(asked, space.low, space.high)))
+    assert stored.min() >= -1 and stored.max() <= 1
+
+    class Scalar(ShortestPathPlanner):
+        def act(self, env: gym.Env, observation: np.ndarray) -> np.ndarray:
+            return np.float32(0.5)  # clipping must not broadcast it to a whole action
+
+    with pytest.raises(ValueError, match=r"the demonstrator's action has shape \(\), the action space \(6,\)"):
+        DDPG("MlpPolicy", env, learning_starts=10_000, policy_kwargs=dict(net_arch=[8])).learn(
+            1, callback=DemonstrationCallback(Scalar(), n_episodes=1)
+        )
+
+
+class _RecordingDemonstrations(DemonstrationCallback):
+    def _on_training_start(self) -> None:
+        super()._on_training_start()
+        self.start_obs = self.model.get_env().get_original_obs().copy()
+
+
+def test_under_vec_normalize_training_starts_from_the_observation_of_the_reset_after_the_demonstrations():
+    env = VecNormalize(make_vec_env(lambda: _small(), n_envs=1, seed=0))
+    model = DDPG("MlpPolicy", env, learning_starts=10_000, policy_kwargs=dict(net_arch=[8]), seed=0)
+    demos = _RecordingDemonstrations(ShortestPathPlanner(), n_episodes=1)
+    model.learn(1, callback=demos)
+    # the first training transition starts from the training env's start (was: the discarded reset's observation)
+    first = model.replay_buffer.observations[demos.transitions]
+    np.testing.assert_array_equal(first, demos.start_obs)
+
+
+def test_demonstration_arguments_are_checked_when_the_callback_is_made():
+    assert DemonstrationCallback(ShortestPathPlanner(), n_episodes=np.int64(2)).n_episodes == 2  # was refused
+    for bad in (True, np.bool_(True), 2.0, "2", None):
+        with pytest.raises(ValueError, match=rf"n_episodes must be a positive integer, got {re.escape(repr(bad))}"):
+            DemonstrationCallback(ShortestPathPlanner(), n_episodes=bad)
+    # were an AttributeError when training started
+    with pytest.raises(ValueError, match=r"demonstrator must have the methods .*got None, which lacks reset and act"):
+        DemonstrationCallback(None, n_episodes=1)
+
+    class ResetOnly:
+        def reset(self, env: gym.Env) -> None: ...
+
+    with pytest.raises(ValueError, match=r"demonstrator must have the methods .*, which lacks act$"):
+        DemonstrationCallback(ResetOnly(), n_episodes=1)
 
 
 def test_goal_observation_through_gymnasium_make():

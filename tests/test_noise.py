@@ -227,6 +227,24 @@ def test_bad_arguments(kwargs, match):
             noise.rearm(**({"sigma": 0.5} | rearm_args))
 
 
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda theta, dt: LinearDecayOUNoise(np.zeros(6), 0.5, 0.1, 10, theta=theta, dt=dt),
+        lambda theta, dt: OrnsteinUhlenbeckNoise(np.zeros(6), 0.5 * np.ones(6), theta=theta, dt=dt),
+    ],
+)
+def test_an_ou_process_whose_steps_diverge_is_refused(make):
+    """SB3's Euler step x += theta * (mean - x) * dt is stable for theta * dt < 2 only (was: draws of inf, then NaN)."""
+    for theta, dt in ((5.0, 1.0), (2.0, 1.0), (200.0, 1e-2)):
+        match = f"theta * dt must be < 2 (from 2 on the OU process's steps grow without bound), got theta={theta!r}, dt="
+        with pytest.raises(ValueError, match=re.escape(match) + r".*: theta \* dt = "):
+            make(theta, dt)
+    noise = make(1.9, 1.0)  # below the bound: it oscillates, and stays bounded
+    np.random.seed(0)
+    assert np.all(np.abs([noise() for _ in range(1000)]) < 100)
+
+
 def test_the_process_is_sb3s_ou_noise_of_the_current_scale():
     """Built through SB3's own constructor: in an episode the draws are exactly SB3's OU noise of that scale."""
     noise = LinearDecayOUNoise(np.zeros(2), 0.5, 0.1, 4, theta=0.2, dt=0.05)

@@ -34,7 +34,8 @@ def _check_process(mean: Any, sigma: Any, theta: Any = 0.15, dt: Any = 1e-2, ini
     failed, or went wrong, at the first draw, during training).
 
     :return: the mean as an array
-    :raises ValueError: naming the first setting that is not finite, positive or of the mean's shape
+    :raises ValueError: naming the first setting that is not finite, positive or of the mean's shape, or theta and dt
+        when ``theta * dt >= 2`` (the process diverges)
     """
     try:
         array = np.asarray(mean, dtype=np.float64)
@@ -46,6 +47,12 @@ def _check_process(mean: Any, sigma: Any, theta: Any = 0.15, dt: Any = 1e-2, ini
     for name, value in (("theta", theta), ("dt", dt)):
         if not _is_real(value) or value <= 0:
             raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+    # SB3's draw x += theta * (mean - x) * dt + ... multiplies x - mean by 1 - theta * dt: stable for theta * dt < 2
+    if theta * dt >= 2:
+        raise ValueError(
+            f"theta * dt must be < 2 (from 2 on the OU process's steps grow without bound), got theta={theta!r}, "
+            f"dt={dt!r}: theta * dt = {theta * dt!r}"
+        )
     if initial_noise is not None:
         try:
             noise = np.broadcast_to(np.asarray(initial_noise, dtype=np.float64), array.shape)
