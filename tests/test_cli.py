@@ -290,6 +290,21 @@ def _every_step(init):
     return wrapped
 
 
+def test_reproduce_checks_every_stored_run_it_reports_before_it_trains(tmp_path):
+    # A subset (--multiple-access noma) trained its runs first and only then met the OMA runs of other settings
+    # that its tables read: the job failed with no tables after training
+    experiments = reproduce_specs(MICRO, seeds=1, hyperparams="paper")
+    oma = [s for s in experiments["ddpg_vs_dtdpg"] if s.multiple_access == "oma"]
+    for spec in oma:  # results written before run identities: other runs' for this job
+        result_path(tmp_path, spec).parent.mkdir(parents=True)
+        result_path(tmp_path, spec).write_text('{"spec": {}}')
+    with pytest.raises(runs.RunMismatchError, match=rf"belongs to another run .*; {len(oma) - 1} more stored runs"):
+        run_reproduce(
+            tmp_path, budget="_micro", seeds=1, progress=False, experiments=["ddpg_vs_dtdpg"], multiple_access=["noma"]
+        )
+    assert sorted(path.name for path in (tmp_path / "runs").iterdir()) == sorted(s.run_id for s in oma)  # nothing trained
+
+
 def test_reproduce_trains_only_the_chosen_experiments(tmp_path, capsys):
     with pytest.raises(ValueError, match=r"experiments: unknown \['table_iii'\]"):
         run_reproduce(tmp_path, budget="_micro", seeds=1, experiments=["table_iii"])
@@ -306,6 +321,8 @@ def test_reproduce_trains_only_the_chosen_experiments(tmp_path, capsys):
         assert result_path(tmp_path, spec).exists() == (spec.run_id in chosen), spec.run_id
     # the other experiments' tables are drawn from the finished runs they share (the radio-map DT-DPG runs)
     assert set(tables["table_ii"]["training"]) == {"radio_map"} and len(tables["ddpg_vs_dtdpg"]) > 4
+    # its statistics figures are named after the experiment: a compare in the same folder keeps its own
+    assert (tmp_path / "ddpg_vs_dtdpg_statistics_iqm.png").is_file() and not (tmp_path / "statistics_iqm.png").exists()
 
 
 def test_reproduce_reports_one_experiment_in_one_mode(tmp_path):

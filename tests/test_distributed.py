@@ -2,13 +2,22 @@
 second worker, an interrupted run or one whose worker died is taken again, and workers and whole-folder jobs keep
 out of each other's folder."""
 
+import json
+import os
 import threading
 
 import pytest
 
 from sb3_dtdpg.experiments import distributed
 from sb3_dtdpg.experiments.distributed import run_study_worker, study_specs
-from sb3_dtdpg.experiments.runs import OutputBusyError, output_lock, result_path, run_folder
+from sb3_dtdpg.experiments.runs import (
+    OutputBusyError,
+    RunMismatchError,
+    output_lock,
+    result_path,
+    run_folder,
+    run_identity,
+)
 
 optuna = pytest.importorskip("optuna")
 
@@ -17,10 +26,10 @@ IDS = sorted(spec.run_id for spec in SPECS)
 
 
 def _finish(spec, out):
-    """What a run leaves when it ends: its result file."""
+    """What a run leaves when it ends: its result file, with the run's identity."""
     path = result_path(out, spec)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("{}")
+    path.write_text(json.dumps({"identity": run_identity(spec)}))
 
 
 def _recorder(ran, raise_on=None, error=None):
@@ -172,3 +181,63 @@ def test_the_worker_says_what_is_left_and_ends_an_interruption_in_one_line(tmp_p
         distributed.main(["compare", *options])
     assert exit_info.value.code == 130
     assert capsys.readouterr().err.strip() == "interrupted: the run in training starts afresh when a worker takes it again"
+
+
+def test_a_stored_run_of_other_settings_is_refused_before_anything_trains(tmp_path, capsys):
+    # the worker treated any result.json as finished: it trained the other runs, said it was done, and the report
+    # then refused the folder (or, with another budget of the same run ids, trained nothing at all)
+    out, ran = tmp_path / "out", []
+    for spec in SPECS[:2]:  # results written before run identities (no identity): another run's for this job
+        result_path(out, spec).parent.mkdir(parents=True)
+        result_path(out, spec).write_text('{"spec": {}}')
+    with pytest.raises(RunMismatchError, match=r"belongs to another run .*; 1 more stored runs do not fit either: "):
+        run_study_worker(SPECS, out, str(tmp_path / "study.log"), "job", run=_recorder(ran))
+    assert ran == []
+    with pytest.raises(SystemExit):
+        distributed.main(
+            [
+                "compare",
+                "--budget",
+                "tiny",
+                "--n-seeds",
+                "1",
+                "--out",
+                str(out),
+                "--storage",
+                str(tmp_path / "s.log"),
+                "--study-name",
+                "j",
+            ]
+        )
+    assert "error: " in capsys.readouterr().err
+
+
+def test_a_study_of_another_run_list_is_refused(tmp_path):
+    # the run indices of the study's trials would name other runs (or a raw "dynamic value space" error)
+    storage, ran = str(tmp_path / "study.log"), []
+    run_study_worker(SPECS, tmp_path / "a", storage, "job", run=_recorder(ran))
+    other = study_specs("compare", "tiny", seeds=2)
+    with pytest.raises(distributed.StudyError, match=r"--study-name job: the study hands out another job's runs \(4 runs"):
+        run_study_worker(other, tmp_path / "b", storage, "job", run=_recorder(ran))
+    assert sorted(ran) == IDS  # the first job only
+    assert run_study_worker(SPECS, tmp_path / "a", storage, "job", run=_recorder(ran)) == []  # the same job joins
+
+
+@pytest.mark.parametrize("storage", ["missing_folder/study.log", "sqlite-typo:///study.db"])
+def test_a_storage_that_cannot_be_opened_is_one_error_line(tmp_path, capsys, storage):
+    argv = ["compare", "--budget", "tiny", "--n-seeds", "1", "--out", str(tmp_path / "out"), "--study-name", "j"]
+    with pytest.raises(SystemExit) as exit_info:
+        distributed.main([*argv, "--storage", str(tmp_path / storage) if storage.endswith(".log") else storage])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and "Traceback" not in err and "--storage" in err and "cannot open it" in err
+
+
+def test_lock_files_are_shared_as_the_umask_allows(tmp_path):
+    # created 0644 whatever the umask: another user of a group-writable folder could not lock it (PermissionError)
+    previous = os.umask(0o002)
+    try:
+        with output_lock(tmp_path):
+            mode = (tmp_path / ".lock").stat().st_mode & 0o777
+    finally:
+        os.umask(previous)
+    assert mode == 0o664

@@ -219,7 +219,7 @@ def test_sigkill_of_compare_while_training_then_a_rerun_gives_the_uninterrupted_
 
 # ---------------------------------------------------------------------------------------------- damaged files
 @pytest.mark.parametrize("name", ["result.json", "checkpoint.json"])
-@pytest.mark.parametrize("content", ["{trunc", "[1, 2]", ""])
+@pytest.mark.parametrize("content", ["{trunc", "[1, 2]", "", '{"identity": null}', '{"identity": "x"}'])
 def test_a_damaged_record_is_a_named_error(tmp_path, name, content):
     run_dir = tmp_path / "runs" / SPEC.run_id
     run_dir.mkdir(parents=True)

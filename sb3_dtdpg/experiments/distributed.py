@@ -21,7 +21,16 @@ from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.experiments.runs import OutputBusyError, RunSpec, get_budget, load_result, result_path, run_one
-from sb3_dtdpg.experiments.storage import FOLDER_LOCK, hold_lock, run_lock_name  # output_lock's OS locks, held apart
+from sb3_dtdpg.experiments.storage import (  # output_lock's OS locks, held apart
+    FOLDER_LOCK,
+    hold_lock,
+    load_results,
+    run_lock_name,
+)
+
+
+class StudyError(ValueError):
+    """The study cannot hand out this job's runs: its storage cannot be opened, or it holds another job's runs."""
 
 
 def study_specs(
@@ -111,14 +120,23 @@ def run_study_worker(
     :param run: the function that runs one spec (tests pass a cheap one)
     :return: the run ids this worker trained
     :raises OutputBusyError: a ``compare`` / ``reproduce`` job holds the folder
+    :raises RunMismatchError: stored results in the folder are other runs' (checked for every run first, as
+        ``compare`` / ``reproduce`` check them)
+    :raises StudyError: the storage cannot be opened, or the study was made for another run list
     """
     import optuna
 
-    if isinstance(storage, str) and storage.endswith(".log"):
-        from optuna.storages import JournalStorage
-        from optuna.storages.journal import JournalFileBackend
+    given = storage
+    try:
+        if isinstance(storage, str) and storage.endswith(".log"):
+            from optuna.storages import JournalStorage
+            from optuna.storages.journal import JournalFileBackend
 
-        storage = JournalStorage(JournalFileBackend(storage))
+            storage = JournalStorage(JournalFileBackend(storage))
+        else:
+            storage = optuna.storages.get_storage(storage)
+    except Exception as error:  # SQLAlchemy, the journal's file and Optuna raise many kinds of errors here
+        raise StudyError(f"--storage {given}: cannot open it ({type(error).__name__}: {error})") from None
     out, indices = Path(out), list(range(len(specs)))
     done: list[str] = []
     state: dict[str, Any] = {"failed": set(), "picked": None}
@@ -143,8 +161,10 @@ def run_study_worker(
     with hold_lock(out / FOLDER_LOCK, shared=True) as free:
         if not free:
             raise OutputBusyError(f"{out} is in use by another job (lock {out / FOLDER_LOCK}); wait for it to end")
+        load_results(out, specs)  # a stored run of other settings is refused before anything trains
         sampler = optuna.samplers.GridSampler({"run": indices}, seed=0)
         study = optuna.create_study(storage=storage, study_name=study_name, sampler=sampler, load_if_exists=True)
+        _check_study_runs(study, specs, study_name)
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         while n_runs is None or len(done) < n_runs:
             trials = study.get_trials(deepcopy=False)
@@ -161,6 +181,29 @@ def run_study_worker(
             study.optimize(objective, n_trials=1)
             handing_out = handing_out and state["picked"] not in taken  # a grid point handed out again: exhausted
     return done
+
+
+def _check_study_runs(study: Any, specs: list[RunSpec], study_name: str) -> None:
+    """
+    Record the run list in a new study, and refuse a study made for another list: its trials' run indices would
+    name other runs (or the grid's choices would not fit).
+
+    :raises StudyError: naming the study and the first run that differs
+    """
+    run_ids = [spec.run_id for spec in specs]
+    recorded = study.user_attrs.get("run_ids")
+    if recorded is None:
+        study.set_user_attr("run_ids", run_ids)
+    elif recorded != run_ids:
+        first = next(
+            (i for i, (a, b) in enumerate(zip(recorded, run_ids, strict=False)) if a != b), min(len(recorded), len(run_ids))
+        )
+        theirs = recorded[first] if first < len(recorded) else "none"
+        ours = run_ids[first] if first < len(run_ids) else "none"
+        raise StudyError(
+            f"--study-name {study_name}: the study hands out another job's runs ({len(recorded)} runs; run {first} is "
+            f"{theirs}, this job's {ours}): give each job, with its options, a study name of its own"
+        )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -255,7 +298,7 @@ def main(argv: list[str] | None = None) -> None:
         args.error(str(error))
     try:
         done = run_study_worker(specs, args.out, args.storage, args.study_name)
-    except (RunMismatchError, RunDivergedError, DamagedRecordError, OutputBusyError) as error:  # one line, as the CLI
+    except (RunMismatchError, RunDivergedError, DamagedRecordError, OutputBusyError, StudyError) as error:  # one line
         args.error(str(error))
     except KeyboardInterrupt:
         print("interrupted: the run in training starts afresh when a worker takes it again", file=sys.stderr)

@@ -366,7 +366,9 @@ def save_and_close(fig: Any, path: str | Path, dpi: int = 120) -> Any:
     return fig
 
 
-def plot_statistics(records: pd.DataFrame, out: str | Path, title: str, reference: str = "DT-DPG") -> list[Path]:
+def plot_statistics(
+    records: pd.DataFrame, out: str | Path, title: str, reference: str = "DT-DPG", prefix: str = ""
+) -> list[Path]:
     """
     The three few-seed statistics figures of Agarwal et al. (NeurIPS 2021), over the runs' test MQI as a share of
     the scenario's ``t_total`` (:mod:`sb3_dtdpg.experiments.aggregate`):
@@ -381,6 +383,8 @@ def plot_statistics(records: pd.DataFrame, out: str | Path, title: str, referenc
     :param out: output folder
     :param title: the figures' title (name the scenario and the budget)
     :param reference: the algorithm label compared with the others in the improvement figure
+    :param prefix: the start of the file names (``reproduce`` names its figures after its experiment, so that a
+        ``compare`` in the same folder keeps its own)
     :return: the written files
     """
     import matplotlib
@@ -404,7 +408,7 @@ def plot_statistics(records: pd.DataFrame, out: str | Path, title: str, referenc
     ax.set_yticks(range(len(groups)), [f"{label} ({_count(len(s), 'run')})" for label, s in groups.items()])
     ax.set_xlabel("IQM of the test MQI / t_total (95 % stratified-bootstrap CI)")
     ax.grid(alpha=0.3, axis="x")
-    written.append(out / "statistics_iqm.png")
+    written.append(out / f"{prefix}statistics_iqm.png")
     _save(fig, written[-1], title)
 
     fig, ax = plt.subplots(figsize=(7.0, 4.6), layout="constrained")
@@ -421,7 +425,7 @@ def plot_statistics(records: pd.DataFrame, out: str | Path, title: str, referenc
     ax.set(xlabel="score tau (test MQI / t_total)", ylabel="share of runs with score > tau", ylim=(-0.03, 1.03))
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    written.append(out / "statistics_profiles.png")
+    written.append(out / f"{prefix}statistics_profiles.png")
     _save(fig, written[-1], title)
 
     pairs = []
@@ -444,6 +448,6 @@ def plot_statistics(records: pd.DataFrame, out: str | Path, title: str, referenc
     ax.set(xlim=(-0.02, 1.02), xlabel="P(a run of X scores above a run of Y), 95 % CI")
     if not pairs:
         ax.text(0.5, 0.5, f"no {reference} runs to compare", ha="center", transform=ax.transAxes)
-    written.append(out / "statistics_improvement.png")
+    written.append(out / f"{prefix}statistics_improvement.png")
     _save(fig, written[-1], title)
     return written

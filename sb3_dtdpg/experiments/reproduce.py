@@ -36,7 +36,7 @@ from sb3_dtdpg.experiments import plots, tables
 from sb3_dtdpg.experiments.budgets import check_seeds
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, evaluate_planners
 from sb3_dtdpg.experiments.paper_task import paper_task_specs, paper_task_tables
-from sb3_dtdpg.experiments.runs import Budget, RunReport, RunSpec, get_budget, load_result, output_lock, run_many
+from sb3_dtdpg.experiments.runs import Budget, RunReport, RunSpec, get_budget, load_results, output_lock, run_many
 from sb3_dtdpg.experiments.storage import result_path
 
 __all__ = [
@@ -345,6 +345,8 @@ def run_reproduce(
         wanted = {
             s.run_id for name in (chosen or DEFAULT_EXPERIMENTS) for s in experiments[name] if s.multiple_access in modes
         }
+        # every stored run the tables will read is checked before anything trains, not only those trained now
+        results = load_results(out, unique)
         report = RunReport()
         if train:
             report = run_many(
@@ -356,7 +358,7 @@ def run_reproduce(
             )
             for run_id, error in report.failed.items():
                 print(f"run {run_id} failed: {error}")
-        results = {spec.run_id: load_result(out, spec) for spec in unique}
+            results = load_results(out, unique)
         if not train:  # the tables say which runs are missing
             report = RunReport.of_stored(results)
 
@@ -403,7 +405,9 @@ def run_reproduce(
                 "radio-map training)"
             )
             tables.save_tables(summary, rec, out, "ddpg_vs_dtdpg", title, incomplete=incomplete("ddpg_vs_dtdpg"))
-            plots.plot_statistics(rec, out, f"DDPG vs DT-DPG, {budget.scenario or 'mall'}, {budget.name} budget")
+            plots.plot_statistics(
+                rec, out, f"DDPG vs DT-DPG, {budget.scenario or 'mall'}, {budget.name} budget", prefix="ddpg_vs_dtdpg_"
+            )
             out_tables["ddpg_vs_dtdpg"] = summary
             if progress:
                 tables.print_table(summary, "DDPG vs DT-DPG")

@@ -57,6 +57,7 @@ from sb3_dtdpg.experiments.storage import (
     clear_checkpoints,
     failure_path,
     load_result,
+    load_results,
     output_lock,
     progress_path,
     read_checkpoint,
@@ -89,6 +90,7 @@ __all__ = [
     "check_budget",
     "get_budget",
     "load_result",
+    "load_results",
     "output_lock",
     "prepare_run",
     "read_checkpoint",
@@ -499,7 +501,7 @@ def run_many(
     :param progress: show a progress bar
     :param on_finish: called with each run id as it finishes
     :return: the report
-    :raises RunMismatchError: a stored result is another run's (checked for every run before any starts)
+    :raises RunMismatchError: stored results are other runs' (checked for every run before any starts, all named)
     :raises ValueError: a run's budget cannot train (:func:`prepare_run`, for every run before any starts), or two
         runs share an id with other settings
     """
@@ -509,10 +511,11 @@ def run_many(
             raise ValueError(f"two runs share the id {spec.run_id!r} with other settings: {unique[spec.run_id]} and {spec}")
     specs = list(unique.values())
     identities = [prepare_run(spec) for spec in specs]  # every run's checks before any run starts
+    stored = load_results(out, specs, identities)
     report = RunReport()
     todo: list[tuple[RunSpec, str, dict[str, Any]]] = []
     for spec, identity in zip(specs, identities, strict=True):
-        if load_result(out, spec, identity) is not None:
+        if stored[spec.run_id] is not None:
             report.skipped.append(spec.run_id)
         else:
             todo.append((spec, str(out), identity))

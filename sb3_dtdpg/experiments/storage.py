@@ -32,6 +32,7 @@ __all__ = [
     "failure_path",
     "hold_lock",
     "load_result",
+    "load_results",
     "output_lock",
     "progress_path",
     "read_checkpoint",
@@ -102,8 +103,11 @@ def _read_record(path: Path) -> dict[str, Any]:
         record = error
     if not isinstance(record, dict):
         reason = f"{type(record).__name__}: {record}" if isinstance(record, Exception) else "not a JSON mapping"
-        raise DamagedRecordError(f"{path} is unreadable ({str(reason)[:200]}); delete {path.parent} to run this run again")
-    return record
+    elif not isinstance(record.get("identity", {}), dict):
+        reason = f"its identity is a JSON {type(record['identity']).__name__}, not a mapping"
+    else:
+        return record
+    raise DamagedRecordError(f"{path} is unreadable ({str(reason)[:200]}); delete {path.parent} to run this run again")
 
 
 def load_result(out: str | Path, spec: RunSpec, identity: dict[str, Any] | None = None) -> dict[str, Any] | None:
@@ -123,6 +127,39 @@ def load_result(out: str | Path, spec: RunSpec, identity: dict[str, Any] | None 
     result = _read_record(path)
     check_identity(result, run_identity(spec) if identity is None else identity, path)
     return result
+
+
+def load_results(
+    out: str | Path, specs: Iterable[RunSpec], identities: Iterable[dict[str, Any]] | None = None
+) -> dict[str, dict[str, Any] | None]:
+    """
+    The stored results of many runs (:func:`load_result`), every one checked before any is used, so that a job
+    learns of all the stored records that do not fit before it trains anything.
+
+    :param out: output folder
+    :param specs: the runs
+    :param identities: their :func:`run_identity` (None: computed here)
+    :return: each run's result (None: not finished), by run id
+    :raises RunMismatchError: some stored results are other runs' (the first named in full, the others' folders listed)
+    :raises DamagedRecordError: the same, where the first is a damaged record
+    """
+    specs = list(specs)
+    identities = list(identities) if identities is not None else [None] * len(specs)
+    results: dict[str, dict[str, Any] | None] = {}
+    problems: list[tuple[RunSpec, ValueError]] = []
+    for spec, identity in zip(specs, identities, strict=True):
+        try:
+            results[spec.run_id] = load_result(out, spec, identity)
+        except (RunMismatchError, DamagedRecordError) as error:
+            problems.append((spec, error))
+    if not problems:
+        return results
+    first = problems[0][1]
+    if len(problems) == 1:
+        raise first
+    others = [str(result_path(out, spec).parent) for spec, _ in problems[1:]]
+    shown = ", ".join(others[:5]) + (f" and {len(others) - 5} more" if len(others) > 5 else "")
+    raise type(first)(f"{first}; {len(others)} more stored runs do not fit either: {shown}") from None
 
 
 def read_progress(out: str | Path, spec: RunSpec) -> dict[str, Any] | None:
@@ -196,7 +233,9 @@ def _locked_descriptor(path: Path, mode: int) -> int | None:
     import fcntl
 
     while True:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        # read-only, created readable and writable as the umask allows: a lock file left by another user of a shared
+        # folder can still be locked (flock needs no write access), and removed by whoever may write the folder
+        fd = os.open(path, os.O_RDONLY | os.O_CREAT, 0o666)
         try:
             fcntl.flock(fd, mode | fcntl.LOCK_NB)
         except BlockingIOError:
