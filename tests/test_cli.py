@@ -155,9 +155,12 @@ def test_reproduce_skips_finished_runs(tmp_path):
     note = f"**Incomplete: 1 of 4 runs have no result yet ({missing.run_id});"
     assert note in (tmp_path / "ddpg_vs_dtdpg.md").read_text()
     assert "Incomplete" not in (tmp_path / "table_ii.md").read_text()
+    # paired.md reads the same runs: it says so too (it said nothing, its DT-DPG - DDPG OMA row silently gone)
+    assert "**Incomplete: 1 of " in (tmp_path / "paired.md").read_text()
 
     tables = run_reproduce(tmp_path, budget="_micro", seeds=1, progress=False)
     assert "Incomplete" not in (tmp_path / "ddpg_vs_dtdpg.md").read_text()
+    assert "Incomplete" not in (tmp_path / "paired.md").read_text()
     for path, content in finished.items():
         assert path.read_bytes() == content  # not re-run ...
         assert not (path.parent / "model.zip").exists()  # ... nor re-trained

@@ -184,12 +184,20 @@ def _dip(log_dir: Path, window: int = 10) -> dict[str, float]:
 
 
 def _paired_table(
-    out: Path, budget: Budget, finished: list[dict[str, Any]], base_lr: float, other_lr: float
+    out: Path,
+    budget: Budget,
+    finished: list[dict[str, Any]],
+    base_lr: float,
+    other_lr: float,
+    incomplete: str | None = None,
 ) -> pd.DataFrame | None:
     """
     The paper's claims as paired differences over seeds (``paired.md`` / ``paired.csv``): NOMA - OMA, DT-DPG -
     DDPG, radio-map training for ``E`` episodes - "reality" training for ``E`` and for ``L``, and the two
     learning rates.
+
+    :param incomplete: the line saying which of the table's runs are missing (failed), written under the title;
+        the contrasts left without a pair are named there too
     """
     rec = tables.run_records(finished)
     if rec.empty:
@@ -207,15 +215,20 @@ def _paired_table(
         ("learning_rate", base_lr, other_lr, ("algorithm", "multiple_access", "approach")),
     ]
     parts = [tables.paired_differences(rec, column, a, b, by) for column, a, b, by in contrasts]
+    unpaired = [f"{a} - {b}" for (column, a, b, _), part in zip(contrasts, parts, strict=True) if part.empty]
     parts = [p for p in parts if not p.empty]
     if not parts:  # no contrast has both sides (e.g. one algorithm and one mode finished)
         return None
     paired = pd.concat(parts, ignore_index=True)
     columns = ("algorithm", "multiple_access", "approach", "learning_rate")
+    notes = ""
+    if incomplete:
+        notes = f"**{incomplete}; no pair for: {', '.join(unpaired)}.**\n\n" if unpaired else f"**{incomplete}.**\n\n"
     write_text(
         out / "paired.md",
         f"# The paper's claims as paired differences ({budget.name} budget; E = {budget.episodes}, "
         f"L = {budget.long_episodes} episodes)\n\n"
+        + notes
         + tables.format_paired_markdown(paired, columns)
         + "\nmean difference ± 95 % CI (t-interval over the per-seed differences); success in percentage points.\n",
     )
@@ -439,6 +452,7 @@ def run_reproduce(
             [r for run_id, r in results.items() if r is not None and run_id not in task_runs],
             base_lr,
             other_learning_rate(hyperparams),
+            report.incomplete_note(run_id for run_id in results if run_id not in task_runs),
         )
         if paired is not None:
             out_tables["paired"] = paired
