@@ -246,6 +246,18 @@ def test_bad_arguments_are_rejected(argv, message, capsys):
     assert message in capsys.readouterr().err
 
 
+def test_the_scenarios_content_not_its_name_decides_a_run(tmp_path):
+    # `compare --scenario mall` after a plain `compare` (scenario None: the env id's mall) was refused as another run
+    from sb3_dtdpg.experiments.specs import check_identity
+
+    default, named = RunSpec("dtdpg", "noma", 0, 36), RunSpec("dtdpg", "noma", 0, 36, scenario="mall")
+    assert default.run_id == named.run_id
+    check_identity({"identity": run_identity(default)}, run_identity(named), tmp_path / "result.json")
+    other = RunSpec("dtdpg", "noma", 0, 36, scenario="small")
+    with pytest.raises(runs.RunMismatchError, match=r"scenario\."):
+        check_identity({"identity": run_identity(default)}, run_identity(other), tmp_path / "result.json")
+
+
 def test_the_observation_is_part_of_a_run():
     paper, goal = RunSpec("dtdpg", "noma", 0, 3, observation="paper"), RunSpec("dtdpg", "noma", 0, 3)
     assert goal.run_id == "dtdpg_noma_s0_goal" and paper.run_id == "dtdpg_noma_s0"  # one folder can hold both

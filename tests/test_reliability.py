@@ -72,7 +72,7 @@ def test_reproduce_reduced_and_small_are_told_apart_even_report_only(tmp_path):
     for specs in reproduce_specs(reduced, 1).values():
         for spec in specs:
             _store(tmp_path, spec)
-    with pytest.raises(RunMismatchError, match=r"spec\.scenario: 'small' stored, None now; scenario\."):
+    with pytest.raises(RunMismatchError, match=r"same id \(scenario: 'small' stored, 'mall' now; scenario\."):
         run_reproduce(tmp_path, budget="small", seeds=1, progress=False, train=False)
 
 
@@ -81,7 +81,10 @@ def test_reproduce_reduced_and_small_are_told_apart_even_report_only(tmp_path):
     [
         (lambda spec: dataclasses.replace(spec, episodes=1), r"spec\.episodes: 1 stored, 3 now"),
         (lambda spec: dataclasses.replace(spec, eval_episodes=9), r"spec\.eval_episodes: 9 stored"),
-        (lambda spec: dataclasses.replace(spec, scenario="mall"), r"spec\.scenario: 'mall' stored, 'small' now"),
+        (
+            lambda spec: dataclasses.replace(spec, scenario="mall"),
+            r"same id \(scenario: 'mall' stored, 'small' now; scenario\.",
+        ),
         (lambda spec: dataclasses.replace(spec, inducing="geodesic"), r"spec\.inducing: 'geodesic' stored, None now"),
     ],
 )

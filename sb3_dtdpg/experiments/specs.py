@@ -261,7 +261,14 @@ _SAME_RESULT_SETTINGS = ("lean", "backprop")
 
 
 def _compared(identity: dict[str, Any]) -> dict[str, Any]:
-    """:return: the identity without :data:`_SAME_RESULT_SETTINGS`"""
+    """
+    :return: the identity without :data:`_SAME_RESULT_SETTINGS`, and without the name the scenario was given by
+        where the identity holds the scenario's content, which decides (None for the env id's default, ``"mall"``,
+        or a file of the same content are one run)
+    """
+    spec = identity.get("spec")
+    if isinstance(spec, dict) and isinstance(identity.get("scenario"), dict):
+        identity = {**identity, "spec": {k: v for k, v in spec.items() if k != "scenario"}}
     hyperparameters = identity.get("hyperparameters")
     if not isinstance(hyperparameters, dict):
         return identity
@@ -277,6 +284,10 @@ def check_identity(stored: dict[str, Any], expected: dict[str, Any], what: Path)
     :raises RunMismatchError: naming the first differences when the identities differ
     """
     differences = _differences(_compared(stored.get("identity", {"format": 1})), _compared(expected))
+    rooms = stored.get("identity", {}).get("scenario"), expected.get("scenario")
+    if all(isinstance(room, dict) for room in rooms) and rooms[0] != rooms[1]:  # the rooms' names first, then the fields
+        first = next(i for i, text in enumerate(differences) if text.startswith("scenario."))
+        differences.insert(first, f"scenario: {rooms[0].get('name')!r} stored, {rooms[1].get('name')!r} now")
     if differences:
         shown = "; ".join(differences[:4]) + (f"; and {len(differences) - 4} more" if len(differences) > 4 else "")
         raise RunMismatchError(
