@@ -153,6 +153,19 @@ def test_learning_curves_state_the_window_and_stay_in_range(tmp_path):
     assert "DT-DPG NOMA (3 seeds)" in labels and "DDPG NOMA (1 seed)" in labels
 
 
+def test_learning_curves_of_one_seed_per_group_claim_no_ci(tmp_path):
+    runs = [write_run(tmp_path / f"s{k}", np.random.default_rng(k).integers(0, 2, 20)) for k in range(2)]
+    title, note = "Learning curves on small, tiny budget", {"band_note": True}  # compare's title
+    figure = plots.plot_learning_curves(
+        {"DT-DPG NOMA": runs[:1], "DDPG NOMA": runs[1:]}, tmp_path / "a.png", title=title, **note
+    )
+    assert legend_texts(figure.legends[0]) == ["DT-DPG NOMA (1 seed)", "DDPG NOMA (1 seed)"]  # was a CI entry, no band
+    assert figure.get_suptitle() == "Learning curves on small, tiny budget (one seed per curve, no CI)"
+    figure = plots.plot_learning_curves({"DT-DPG NOMA": runs, "DDPG NOMA": runs[1:]}, tmp_path / "b.png", title=title, **note)
+    assert "95 % bootstrap CI over seeds" in legend_texts(figure.legends[0])
+    assert figure.get_suptitle() == f"{title} (mean and 95 % CI over seeds)"
+
+
 def test_mission_logger_for_a_plain_sb3_algorithm(tmp_path):
     from tbparse import SummaryReader
 

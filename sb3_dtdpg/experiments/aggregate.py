@@ -16,7 +16,8 @@ used here rather than re-implemented:
 - performance profile: the share of runs scoring above each threshold tau (rliable's
   ``create_performance_profile``), with a bootstrap CI per threshold.
 
-With fewer than two runs no interval can be estimated: the bounds are ``nan``, shown as ``n/a``.
+Non-finite scores (the ``nan`` of a run without a score, an ``inf``) are dropped before any statistic, per task.
+With fewer than two (finite) runs no interval can be estimated: the bounds are ``nan``, shown as ``n/a``.
 """
 
 from __future__ import annotations
@@ -41,18 +42,27 @@ def iqm(scores: np.ndarray) -> float:
     """
     Interquartile mean: the mean of the scores left after cutting the lowest and highest 25 %.
 
-    :param scores: scores of any shape (runs, or runs x tasks); NaNs are dropped
-    :return: the IQM (``nan`` without scores)
+    :param scores: scores of any shape (runs, or runs x tasks); non-finite scores are dropped
+    :return: the IQM (``nan`` without finite scores)
     """
-    x = np.asarray(scores, dtype=np.float64).ravel()
-    x = x[~np.isnan(x)]
+    x = _finite(scores)
     return float(stats.trim_mean(x, 0.25)) if x.size else float("nan")
 
 
+def _finite(scores: np.ndarray) -> np.ndarray:
+    """The finite scores, flattened."""
+    x = np.asarray(scores, dtype=np.float64).ravel()
+    return x[np.isfinite(x)]
+
+
 def _pooled_iqm(*columns: np.ndarray, axis: int = -1) -> np.ndarray:
-    """:func:`iqm` of the runs x tasks of every resample at once (``scipy.stats.bootstrap``'s vectorized form; the
-    scores in the order of :func:`iqm`'s ``ravel``, so each resample gives the same bits). No NaNs."""
-    pooled = np.stack([np.moveaxis(column, axis, -1) for column in columns], axis=-1)
+    """:func:`iqm` of the runs x tasks of every resample at once (``scipy.stats.bootstrap``'s vectorized form; with
+    as many runs in every task, the scores in the order of :func:`iqm`'s ``ravel``, so each resample gives the same
+    bits). No NaNs."""
+    columns = tuple(np.moveaxis(column, axis, -1) for column in columns)
+    if len({column.shape[-1] for column in columns}) > 1:  # tasks that lost different numbers of runs
+        return stats.trim_mean(np.concatenate(columns, axis=-1), 0.25, axis=-1)
+    pooled = np.stack(columns, axis=-1)
     return stats.trim_mean(pooled.reshape(*pooled.shape[:-2], -1), 0.25, axis=-1)
 
 
@@ -64,9 +74,11 @@ def _percentile_ci(
     seed: int,
     vectorized: bool = False,
 ) -> tuple[float, float]:
-    """``scipy.stats.bootstrap`` of independent samples (percentile method); a constant statistic gives a point.
-    ``vectorized``: ``statistic`` takes an ``axis`` and maps batches of resamples at once."""
-    point = statistic(*samples)
+    """``scipy.stats.bootstrap`` of independent samples (percentile method); a statistic equal on every resample
+    gives a point, one that is ``nan`` on some resample gives ``(nan, nan)``. ``vectorized``: ``statistic`` takes an
+    ``axis`` and maps batches of resamples at once."""
+    if not np.isfinite(statistic(*samples)):  # nothing to resample (and no warning from scipy about it)
+        return float("nan"), float("nan")
     result = stats.bootstrap(
         tuple(samples),
         statistic if vectorized else lambda *resampled: statistic(*resampled),
@@ -77,10 +89,10 @@ def _percentile_ci(
         method="percentile",
         random_state=np.random.default_rng(seed),
     )
-    low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
-    if np.isnan(low) or np.isnan(high):  # every resample equal (scipy reports a degenerate distribution as nan)
-        return float(point), float(point)
-    return low, high
+    distribution = np.asarray(result.bootstrap_distribution, dtype=np.float64).ravel()
+    if np.all(np.isfinite(distribution)) and np.all(distribution == distribution[0]):
+        return float(distribution[0]), float(distribution[0])  # some scipy versions give nan bounds here
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 
 def stratified_bootstrap_ci(
@@ -93,22 +105,32 @@ def stratified_bootstrap_ci(
     """
     Percentile bootstrap CI of ``statistic``, resampling the runs of every task independently.
 
+    Non-finite scores are dropped first, in each task; a task with fewer finite runs than another reaches
+    ``statistic`` padded with ``nan`` (which :func:`iqm` drops).
+
     :param scores: ``(runs,)`` or ``(runs, tasks)``
     :param statistic: maps a ``(runs, tasks)`` array to a number (default: :func:`iqm`)
     :param confidence: confidence level in (0, 1)
     :param n_resamples: bootstrap resamples
     :param seed: seed of the resampling (the CI is deterministic for a given seed)
-    :return: ``(low, high)``; ``(nan, nan)`` with fewer than two runs
+    :return: ``(low, high)``; ``(nan, nan)`` where a task has fewer than two finite runs
     """
     check_confidence(confidence)
     x = np.asarray(scores, dtype=np.float64)
-    x = x.reshape(len(x), -1) if x.ndim else x.reshape(1, 1)
-    if x.shape[0] < 2:
+    if x.size == 0:
         return float("nan"), float("nan")
-    tasks = [x[:, k] for k in range(x.shape[1])]
-    if statistic is iqm and not np.isnan(x).any():  # the default, on all resamples at once (the same CI, ~50x faster)
+    x = x.reshape(len(x), -1) if x.ndim else x.reshape(1, 1)
+    tasks = [x[np.isfinite(x[:, k]), k] for k in range(x.shape[1])]
+    if min(task.size for task in tasks) < 2:
+        return float("nan"), float("nan")
+    if statistic is iqm:  # the default, on all resamples at once (the same CI, ~50x faster)
         return _percentile_ci(tasks, _pooled_iqm, confidence, n_resamples, seed, vectorized=True)
-    return _percentile_ci(tasks, lambda *columns: statistic(np.stack(columns, axis=1)), confidence, n_resamples, seed)
+
+    def on_columns(*columns: np.ndarray) -> float:
+        runs = max(column.size for column in columns)
+        return statistic(np.stack([np.pad(c, (0, runs - c.size), constant_values=np.nan) for c in columns], axis=1))
+
+    return _percentile_ci(tasks, on_columns, confidence, n_resamples, seed)
 
 
 def pointwise_bootstrap_ci(
@@ -156,17 +178,18 @@ def probability_of_improvement(
     """
     The probability that a run of X scores above a run of Y, ties counting half (Mann-Whitney U / (n_x n_y)).
 
-    :param x: scores of X's runs
-    :param y: scores of Y's runs
+    :param x: scores of X's runs (non-finite scores are dropped)
+    :param y: scores of Y's runs (likewise)
     :param confidence: confidence level of the CI
     :param n_resamples: bootstrap resamples (X and Y resampled independently)
     :param seed: seed of the resampling
-    :return: ``(probability, low, high)``; the bounds are ``nan`` unless both have at least two runs
+    :return: ``(probability, low, high)``; the bounds are ``nan`` unless both have at least two finite runs
+    :raises ValueError: X or Y has no finite score
     """
     check_confidence(confidence)
-    a, b = np.asarray(x, dtype=np.float64).ravel(), np.asarray(y, dtype=np.float64).ravel()
+    a, b = _finite(x), _finite(y)
     if a.size == 0 or b.size == 0:
-        raise ValueError(f"probability_of_improvement needs scores for both, got {a.size} and {b.size}")
+        raise ValueError(f"probability_of_improvement needs finite scores for both, got {a.size} and {b.size}")
 
     def probability(p: np.ndarray, q: np.ndarray) -> float:
         return float(stats.mannwhitneyu(p, q).statistic) / (p.size * q.size)
@@ -183,15 +206,19 @@ def performance_profile(
     """
     The share of runs with a score above each threshold (a run-score distribution), with bootstrap CIs.
 
-    :param scores: the runs' scores
+    :param scores: the runs' scores (non-finite scores are dropped)
     :param taus: thresholds
     :param confidence: confidence level of the CIs
     :param n_resamples: bootstrap resamples
     :param seed: seed of the resampling
-    :return: ``(share, low, high)``, each shaped like ``taus``; the bounds are ``nan`` with fewer than two runs
+    :return: ``(share, low, high)``, each shaped like ``taus``; the bounds are ``nan`` with fewer than two finite
+        runs, the shares too without any
     """
-    x = np.asarray(scores, dtype=np.float64).ravel()
+    x = _finite(scores)
     thresholds = np.asarray(taus, dtype=np.float64).ravel()
+    if x.size == 0:
+        nan = np.full(thresholds.size, np.nan)
+        return nan, nan.copy(), nan.copy()
     above = (x[:, None] > thresholds[None, :]).astype(np.float64)  # (runs, taus)
     share = above.mean(axis=0)
     low, high = pointwise_bootstrap_ci(above, confidence, n_resamples, seed)

@@ -409,7 +409,8 @@ def run_compare(
             plots.plot_learning_curves(
                 groups,
                 out / "learning_curves.png",
-                title=f"Learning curves on {budget.scenario or 'mall'}, {budget.name} budget (mean and 95 % CI over seeds)",
+                title=f"Learning curves on {budget.scenario or 'mall'}, {budget.name} budget",
+                band_note=True,
             )
         panels: dict[str, dict[str, Any]] = {}
         goals: dict[str, Any] = {}

@@ -152,18 +152,22 @@ def plot_learning_curves(
     tags: Sequence[tuple[str, str]] = (("mission/mqi", "MQI"), (SUCCESS_TAG, "success rate")),
     smooth: int = 10,
     title: str | None = None,
+    band_note: bool = False,
 ) -> Any:
     """
     Learning curves: for each group (e.g. ``DT-DPG NOMA``), the mean over its runs (seeds) and a 95 %
     percentile-bootstrap CI band over the runs, against the training episode; DT-DPG's transfer episodes
     are marked by dotted lines. Each run's curve is the plain rolling mean of its per-episode values over
-    ``smooth`` episodes (:func:`rolling_curve`), and the y label says so.
+    ``smooth`` episodes (:func:`rolling_curve`), and the y label says so. A group of one run has no band; where
+    no group has two, the legend has no CI entry.
 
     :param groups: group label -> the TensorBoard folders of its runs
     :param path: where to save the PNG
     :param tags: ``(tag, axis label)`` pairs, one panel each
     :param smooth: rolling-mean window (episodes) of each run's curve
     :param title: figure title
+    :param band_note: end the title with what the bands are: "(mean and 95 % CI over seeds)", or "(one seed per
+        curve, no CI)" where no group has two runs
     :return: the figure
     """
     import matplotlib
@@ -175,7 +179,7 @@ def plot_learning_curves(
 
     fig, axes = plt.subplots(1, len(tags), figsize=(6.0 * len(tags), 4.6), squeeze=False, layout="constrained")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    transfers = False
+    transfers = banded = False
     as_logged: set[str] = set()
     wanted = list(dict.fromkeys([*(tag for tag, _ in tags), _LOGGED_SUCCESS_RATE, _PHASE_TAG]))
     for k, (label, dirs) in enumerate(groups.items()):
@@ -203,6 +207,7 @@ def plot_learning_curves(
             )
             if len(series) > 1:
                 ax.fill_between(x, low, high, color=colour, alpha=0.2, lw=0)
+                banded = True
             for episode in filter(None, (_transfer(run) for run in runs)):
                 ax.axvline(episode, color=colour, ls=":", lw=0.8)
                 transfers = True
@@ -221,13 +226,16 @@ def plot_learning_curves(
         ax.grid(alpha=0.3)
     handles, labels = axes[0][0].get_legend_handles_labels()
     if handles:
-        handles.append(Line2D([], [], color="0.3", lw=6, alpha=0.25))
-        labels.append("95 % bootstrap CI over seeds")
+        if banded:
+            handles.append(Line2D([], [], color="0.3", lw=6, alpha=0.25))
+            labels.append("95 % bootstrap CI over seeds")
         if transfers:
             handles.append(Line2D([], [], color="0.3", ls=":", lw=0.8))
             labels.append("transfer to the second phase (DT-DPG)")
         columns = 3 if len(tags) > 1 else 2  # one 6-inch panel holds two legend columns, not three
         fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), columns), fontsize=8, frameon=False)
+    if title and band_note:
+        title += " (mean and 95 % CI over seeds)" if banded else " (one seed per curve, no CI)"
     return _save(fig, path, title)
 
 
@@ -378,6 +386,12 @@ def plot_statistics(
     - ``statistics_improvement.png``: per mode, the probability that a ``reference`` run beats a run of each other
       algorithm, with its 95 % bootstrap CI (0.5: no difference).
 
+    Every statistic of a configuration uses the same runs: those with a finite score. The labels give their
+    number (``4 of 5 runs`` where a run has none), the improvement figure's for both sides, and the axes name a CI
+    only where some configuration has the two runs it needs. A run whose ``t_total`` is unknown (``mqi_scale``
+    ``nan`` or not positive) is left out rather than drawn on another scale, and the figures' titles say how many
+    were. Records without an ``mqi_scale`` column are drawn as raw MQIs, and the axes say so.
+
     :param records: :func:`sb3_dtdpg.experiments.tables.run_records` (columns ``algorithm``, ``multiple_access``,
         ``mqi``, ``mqi_scale``)
     :param out: output folder
@@ -393,9 +407,22 @@ def plot_statistics(
     import matplotlib.pyplot as plt
 
     out = Path(out)
-    scale = records["mqi_scale"].where(records["mqi_scale"] > 0, 1.0) if "mqi_scale" in records else 1.0
-    data = records.assign(score=records["mqi"] / scale)
-    groups = {f"{a} {m}": g["score"].to_numpy() for (a, m), g in data.groupby(["algorithm", "multiple_access"], sort=False)}
+    if "mqi_scale" in records:
+        scale = records["mqi_scale"].astype(float)
+        known = scale.gt(0) & np.isfinite(scale)
+        data, score_name = records[known].assign(score=records["mqi"] / scale), "test MQI / t_total"
+        if unscaled := int((~known).sum()):
+            title = f"{title}\n({_count(unscaled, 'run')} left out: t_total of the scenario unknown)"
+    else:
+        data, score_name = records.assign(score=records["mqi"].astype(float)), "test MQI"
+    runs: dict[tuple[str, str], tuple[np.ndarray, int]] = {}  # (algorithm, mode) -> (finite scores, runs)
+    for (algo, mode), group in data.groupby(["algorithm", "multiple_access"], sort=False):
+        scores = group["score"].to_numpy(dtype=float)
+        runs[(algo, mode)] = (scores[np.isfinite(scores)], len(scores))
+    groups = {f"{algo} {mode}": scores for (algo, mode), (scores, _) in runs.items()}
+    counts = {f"{algo} {mode}": _used(scores.size, n) for (algo, mode), (scores, n) in runs.items()}
+    complete = {f"{algo} {mode}": scores.size == n for (algo, mode), (scores, n) in runs.items()}
+    any_ci = any(scores.size > 1 for scores in groups.values())
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     written = []
 
@@ -405,36 +432,42 @@ def plot_statistics(
         ax.plot([iqm(scores)], [k], "o", color=colours[k % len(colours)], ms=7)
         if np.isfinite(low):
             ax.plot([low, high], [k, k], "-", color=colours[k % len(colours)], lw=5, alpha=0.5)
-    ax.set_yticks(range(len(groups)), [f"{label} ({_count(len(s), 'run')})" for label, s in groups.items()])
-    ax.set_xlabel("IQM of the test MQI / t_total (95 % stratified-bootstrap CI)")
+    ax.set_yticks(range(len(groups)), [f"{label} ({counts[label]})" for label in groups])
+    ax.set_xlabel(f"IQM of the {score_name}" + (" (95 % stratified-bootstrap CI)" if any_ci else ""))
     ax.grid(alpha=0.3, axis="x")
     written.append(out / f"{prefix}statistics_iqm.png")
     _save(fig, written[-1], title)
 
     fig, ax = plt.subplots(figsize=(7.0, 4.6), layout="constrained")
-    all_scores = np.concatenate(list(groups.values()))
-    low_score, high_score = float(all_scores.min()), float(all_scores.max())
-    margin = max(0.1 * (high_score - low_score), 0.005)  # the range the runs span: where the profiles differ
-    taus = np.linspace(low_score - margin, high_score + margin, 201)
-    for k, (label, scores) in enumerate(groups.items()):
-        share, low, high = performance_profile(scores, taus)
-        colour = colours[k % len(colours)]
-        ax.plot(taus, share, color=colour, ls=_SERIES_STYLES[k % len(_SERIES_STYLES)], label=label)
-        if np.all(np.isfinite(low)):
-            ax.fill_between(taus, low, high, color=colour, alpha=0.15, lw=0)
-    ax.set(xlabel="score tau (test MQI / t_total)", ylabel="share of runs with score > tau", ylim=(-0.03, 1.03))
+    all_scores = np.concatenate([np.empty(0), *groups.values()])
+    if all_scores.size:
+        low_score, high_score = float(all_scores.min()), float(all_scores.max())
+        margin = max(0.1 * (high_score - low_score), 0.005)  # the range the runs span: where the profiles differ
+        taus = np.linspace(low_score - margin, high_score + margin, 201)
+        for k, (label, scores) in enumerate(groups.items()):
+            share, low, high = performance_profile(scores, taus)
+            colour = colours[k % len(colours)]
+            named = label if complete[label] else f"{label} ({counts[label]})"
+            ax.plot(taus, share, color=colour, ls=_SERIES_STYLES[k % len(_SERIES_STYLES)], label=named)
+            if np.all(np.isfinite(low)):
+                ax.fill_between(taus, low, high, color=colour, alpha=0.15, lw=0)
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "no run with a finite score", ha="center", transform=ax.transAxes)
+    ax.set(xlabel=f"score tau ({score_name})", ylabel="share of runs with score > tau", ylim=(-0.03, 1.03))
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
     written.append(out / f"{prefix}statistics_profiles.png")
     _save(fig, written[-1], title)
 
     pairs = []
-    for mode, group in data.groupby("multiple_access", sort=False):
-        by_algo = {a: g["score"].to_numpy() for a, g in group.groupby("algorithm", sort=False)}
+    modes = dict.fromkeys(mode for _, mode in runs)
+    for mode in modes:
+        by_algo = {algo: scores for (algo, m), (scores, _) in runs.items() if m == mode and scores.size}
         if reference in by_algo:
+            x = by_algo[reference]
             pairs += [
-                (f"{reference} > {other} ({mode})", by_algo[reference], s)
-                for other, s in by_algo.items()
+                (f"{reference} > {other} ({mode}, {x.size} vs {_count(y.size, 'run')})", x, y)
+                for other, y in by_algo.items()
                 if other != reference
             ]
     fig, ax = plt.subplots(figsize=(7.0, 0.6 * max(len(pairs), 1) + 1.6), layout="constrained")
@@ -445,9 +478,16 @@ def plot_statistics(
             ax.plot([low, high], [k, k], "-", color=colours[0], lw=5, alpha=0.5)
     ax.axvline(0.5, color="0.4", ls=":", lw=1)
     ax.set_yticks(range(len(pairs)), [label for label, _, _ in pairs])
-    ax.set(xlim=(-0.02, 1.02), xlabel="P(a run of X scores above a run of Y), 95 % CI")
+    with_ci = any(x.size > 1 and y.size > 1 for _, x, y in pairs)
+    ax.set(xlim=(-0.02, 1.02), xlabel="P(a run of X scores above a run of Y)" + (", 95 % CI" if with_ci else ""))
     if not pairs:
-        ax.text(0.5, 0.5, f"no {reference} runs to compare", ha="center", transform=ax.transAxes)
+        nothing = f"nothing to compare: no mode has runs of {reference} and of another algorithm with a score"
+        ax.text(0.5, 0.5, nothing, ha="center", transform=ax.transAxes)
     written.append(out / f"{prefix}statistics_improvement.png")
     _save(fig, written[-1], title)
     return written
+
+
+def _used(used: int, runs: int) -> str:
+    """``"5 runs"``, or ``"4 of 5 runs"`` where some runs have no finite score."""
+    return _count(used, "run") if used == runs else f"{used} of {_count(runs, 'run')}"

@@ -3,8 +3,9 @@
 Learners are summarised over seeds: each seed's test figures (the mean over its test episodes) are one
 sample, and the CI is the t-interval over seeds. Planners have no seeds; their CI is over test episodes.
 The test MQI also gets the interquartile mean (IQM) with a 95 % stratified-bootstrap CI
-(:mod:`sb3_dtdpg.experiments.aggregate`), the RL field's summary for few-seed comparisons. A CI that
-cannot be estimated (one seed) is shown as ``n/a``, never as ``nan``.
+(:mod:`sb3_dtdpg.experiments.aggregate`), the RL field's summary for few-seed comparisons, over the same
+samples as the mean: where a sample has no finite MQI, neither has a value (``-``). A CI that cannot be
+estimated (one seed) is shown as ``n/a``, never as ``nan``.
 """
 
 from __future__ import annotations
@@ -98,8 +99,8 @@ def summarise(records: pd.DataFrame, by: Sequence[str] = ("algorithm", "multiple
     :param records: output of :func:`run_records`
     :param by: the columns that define a configuration
     :return: one row per configuration: ``n`` (seeds), ``<metric>`` and ``<metric>_ci`` columns,
-        ``mqi_iqm`` with its bootstrap CI ``mqi_iqm_low`` / ``mqi_iqm_high``, ``mqi_scale`` (the
-        scenario's ``t_total``) and ``train_timesteps`` (mean)
+        ``mqi_iqm`` with its bootstrap CI ``mqi_iqm_low`` / ``mqi_iqm_high`` (all ``nan``, like ``mqi``, where a
+        run's MQI is not finite), ``mqi_scale`` (the scenario's ``t_total``) and ``train_timesteps`` (mean)
     """
     rows = []
     for key, group in records.groupby(list(by), sort=False, dropna=False):  # a NaN setting is a configuration too
@@ -225,13 +226,15 @@ def add_planner_fractions(
     :param best: label (``algorithm``) of the best planner's rows
     :param shortest: label of the shortest-path planner's rows
     :param planners: the planner rows on the same test missions, for a summary that has none (e.g. Table II)
-    :return: the summary with the new columns (NaN where a mode has no such planner row)
+    :return: the summary with the new columns (NaN where a mode has no such planner row, or where the planner's
+        MQI is not positive: a ratio to it would rank the rows backwards)
     """
     summary = summary.copy()
     rows = summary if planners is None else planners
     for column, label in (("mqi_of_best", best), ("mqi_of_shortest", shortest)):
         reference = rows[rows["algorithm"] == label].set_index("multiple_access")["mqi"]
-        summary[column] = summary["mqi"] / summary["multiple_access"].map(reference).astype(float)
+        by_row = summary["multiple_access"].map(reference).astype(float)
+        summary[column] = summary["mqi"] / by_row.where(by_row > 0)
     if "mqi_bound" in summary:
         on_radio_map = summary["mqi_radio_map"] if "mqi_radio_map" in summary else summary["mqi"]
         summary["mqi_gap"] = summary["mqi_bound"] - on_radio_map
@@ -239,6 +242,12 @@ def add_planner_fractions(
 
 
 def _add_iqm(row: dict[str, Any], mqi: np.ndarray) -> None:
+    """The IQM columns over the samples of the mean column: none where the mean has none (a non-finite MQI), where
+    :func:`iqm` would drop that sample and the table's note ("same samples") would no longer hold."""
+    mqi = np.asarray(mqi, dtype=np.float64)
+    if not np.all(np.isfinite(mqi)):
+        row["mqi_iqm"] = row["mqi_iqm_low"] = row["mqi_iqm_high"] = math.nan
+        return
     row["mqi_iqm"] = iqm(mqi)
     row["mqi_iqm_low"], row["mqi_iqm_high"] = stratified_bootstrap_ci(mqi)
 
