@@ -547,7 +547,7 @@ def _saved_model_env(
             if value is not None:
                 check_not_input(option, value, scenario_file, "the scenario file of the test env")
         guessed = [key for key in ("scenario", "multiple_access") if key not in settings and key not in kwargs]
-        if guessed and saved.source == "the observation length":
+        if guessed and saved.guessed:
             print(
                 f"sb3-dtdpg {args.command}: warning: the model {args.model} records no env settings (only its "
                 f"observation length tells its layout): testing it with {env_id}'s default "

@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import sys
 import traceback
+import warnings
 from collections.abc import Iterator
 from types import ModuleType
 from typing import Any, NoReturn
@@ -42,7 +43,9 @@ class _SettingsCheckedAlgo:
         from sb3_dtdpg.env_settings import EnvSettingsMismatch, check_settings
 
         model = self.algo_class.load(path, *args, **kwargs)
-        if self.envs:
+        if not self.envs:  # this rl_zoo3 builds its env elsewhere: say that the settings went unchecked
+            warnings.warn(f"the model {path}: its env settings could not be checked with this rl_zoo3 version", stacklevel=2)
+        else:
             try:
                 check_settings(getattr(model, "env_settings", None), self.envs[-1], f"the model {path}")
             except EnvSettingsMismatch:

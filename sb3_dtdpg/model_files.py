@@ -49,6 +49,7 @@ class SavedModel:
     :param source: where the settings come from, for messages
     :param custom_objects: saved attributes to replace on loading (SB3's ``custom_objects``)
     :param normalization: the RL Zoo's ``vecnormalize.pkl`` of the model (its observation statistics), None: none
+    :param guessed: the settings are only what the observation length tells (the model records none)
     """
 
     def __init__(
@@ -60,10 +61,11 @@ class SavedModel:
         source: str,
         custom_objects: dict[str, Any] | None = None,
         normalization: Path | None = None,
+        guessed: bool = False,
     ) -> None:
         self.path, self.algo, self.settings, self.env_id, self.source = path, algo, settings, env_id, source
         self.custom_objects = dict(custom_objects or {})
-        self.normalization = normalization
+        self.normalization, self.guessed = normalization, guessed
 
     def env_kwargs(self, channel: str, **overrides: Any) -> dict[str, Any]:
         """
@@ -182,19 +184,20 @@ class SavedModel:
 
 class _Normalizer:
     """
-    ``VecNormalize.normalize_obs`` of saved statistics, without the ``VecNormalize`` (which has no env once
-    unpickled, and then cannot be copied with the test env).
+    The observation normalisation of saved ``VecNormalize`` statistics (its ``normalize_obs``: the running mean and
+    variance, clipped to ``clip_obs``), without the ``VecNormalize`` itself, which has no env once unpickled and then
+    cannot be copied with the test env.
 
     :param statistics: the unpickled ``VecNormalize``
     """
 
     def __init__(self, statistics: Any) -> None:
-        self.obs_rms, self.clip_obs, self.epsilon = statistics.obs_rms, statistics.clip_obs, statistics.epsilon
+        self.mean, self.var = statistics.obs_rms.mean, statistics.obs_rms.var
+        self.clip_obs, self.epsilon = statistics.clip_obs, statistics.epsilon
 
     def __call__(self, observation: Any) -> Any:
-        from stable_baselines3.common.vec_env import VecNormalize
-
-        return VecNormalize._normalize_obs(self, observation, self.obs_rms).astype(np.float32)  # type: ignore[arg-type]
+        scaled = (observation - self.mean) / np.sqrt(self.var + self.epsilon)
+        return np.clip(scaled, -self.clip_obs, self.clip_obs).astype(np.float32)
 
 
 def _model_path(path: str | Path) -> Path:
@@ -253,7 +256,8 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
             "power_mapping": spec.get("power_mapping"),  # None: a run recorded before power mappings, not checked
         }
         source = str(result_file)
-    if settings is None:
+    guessed = settings is None
+    if guessed:
         settings, source = _settings_from_space(data.get("observation_space")), "the observation length"
     custom_objects = {}
     if data.get("replay_buffer_class") is NStepReplayBuffer and data.get("n_steps", 1) > 1:
@@ -269,7 +273,7 @@ def read_saved_model(path: str | Path, algo: str | None = None) -> SavedModel:
             "into its own RL Zoo run folder"
         )
     normalization = statistics[0] if statistics else None
-    return SavedModel(path, algo, settings, spec.get("env_id"), source, custom_objects, normalization)
+    return SavedModel(path, algo, settings, spec.get("env_id"), source, custom_objects, normalization, guessed)
 
 
 def _algorithm(

@@ -95,6 +95,10 @@ def test_the_mqi_scale_of_a_run_is_its_tasks_t_total():
     ]
     records = run_records([_fake_result(spec, mqi=50.0) for spec in specs])
     assert list(records["mqi_scale"]) == [100.0, 1000.0]  # small's t_total; the paper's task: 1000
+    # a run of a scenario file moved since (the same run: its content decides) keeps its scale, from that content
+    moved = RunSpec("ddpg", "noma", 0, 3, scenario="/nowhere/room.yaml")
+    result = {**_fake_result(specs[0], mqi=50.0), "spec": dataclasses.asdict(moved)}
+    assert run_records([result])["mqi_scale"].tolist() == [100.0]
 
 
 def test_compare_trains_on_the_channel_of_its_env_id():

@@ -217,9 +217,16 @@ def test_a_study_of_another_run_list_is_refused(tmp_path):
     storage, ran = str(tmp_path / "study.log"), []
     run_study_worker(SPECS, tmp_path / "a", storage, "job", run=_recorder(ran))
     other = study_specs("compare", "tiny", seeds=2)
-    with pytest.raises(distributed.StudyError, match=r"--study-name job: the study hands out another job's runs \(4 runs"):
+    with pytest.raises(
+        distributed.StudyError, match=r"--study-name job: the study hands out the runs of another job \(4 runs"
+    ):
         run_study_worker(other, tmp_path / "b", storage, "job", run=_recorder(ran))
     assert sorted(ran) == IDS  # the first job only
+    # the same run ids with another budget (run ids do not name it) are another job too
+    other_budget = study_specs("compare", "small", seeds=1)
+    assert [s.run_id for s in other_budget] == [s.run_id for s in SPECS]
+    with pytest.raises(distributed.StudyError, match=r"the study hands out the runs of another job"):
+        run_study_worker(other_budget, tmp_path / "c", storage, "job", run=_recorder(ran))
     assert run_study_worker(SPECS, tmp_path / "a", storage, "job", run=_recorder(ran)) == []  # the same job joins
 
 

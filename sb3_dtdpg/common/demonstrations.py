@@ -82,8 +82,9 @@ class DemonstrationCallback(BaseCallback):
         setattr(self.model, SEEDED_ATTRIBUTE, True)
         # The algorithm's next step starts from a fresh episode, from the observations SB3's own reset sets
         self.model._last_obs = vec_env.reset()
-        if self.model._vec_normalize_env is not None:
-            self.model._last_original_obs = self.model._vec_normalize_env.get_original_obs()
+        normalization = self.model.get_vec_normalize_env()
+        if normalization is not None:
+            self.model._last_original_obs = normalization.get_original_obs()
         if self.verbose:
             print(f"Replay buffer seeded with {self.n_episodes} demonstration episodes ({self.transitions} transitions)")
 

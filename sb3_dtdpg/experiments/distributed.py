@@ -15,11 +15,15 @@ options on the CLI later find the same runs)::
 """
 
 import argparse
+import dataclasses
+import hashlib
+import json
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from sb3_dtdpg.common.files import json_default
 from sb3_dtdpg.experiments.runs import OutputBusyError, RunSpec, get_budget, load_result, result_path, run_one
 from sb3_dtdpg.experiments.storage import (  # output_lock's OS locks, held apart
     FOLDER_LOCK,
@@ -126,17 +130,8 @@ def run_study_worker(
     """
     import optuna
 
-    given = storage
-    try:
-        if isinstance(storage, str) and storage.endswith(".log"):
-            from optuna.storages import JournalStorage
-            from optuna.storages.journal import JournalFileBackend
-
-            storage = JournalStorage(JournalFileBackend(storage))
-        else:
-            storage = optuna.storages.get_storage(storage)
-    except Exception as error:  # SQLAlchemy, the journal's file and Optuna raise many kinds of errors here
-        raise StudyError(f"--storage {given}: cannot open it ({type(error).__name__}: {error})") from None
+    if isinstance(storage, str):
+        storage = _open_storage(storage)
     out, indices = Path(out), list(range(len(specs)))
     done: list[str] = []
     state: dict[str, Any] = {"failed": set(), "picked": None}
@@ -183,26 +178,48 @@ def run_study_worker(
     return done
 
 
+def _open_storage(url: str) -> Any:
+    """
+    :param url: a ``.log`` path (a ``JournalFileStorage``) or a database URL
+    :return: the Optuna storage
+    :raises StudyError: naming ``--storage`` when it cannot be opened (a missing folder, a bad URL, no driver)
+    """
+    import optuna
+    from optuna.storages import JournalStorage, RDBStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    try:
+        return JournalStorage(JournalFileBackend(url)) if url.endswith(".log") else RDBStorage(url)
+    except (OSError, ValueError, ImportError, optuna.exceptions.OptunaError) as error:
+        raise StudyError(f"--storage {url}: cannot open it ({type(error).__name__}: {error})") from None
+    except Exception as error:  # SQLAlchemy's own errors (an unknown dialect, a refused connection)
+        if type(error).__module__.startswith("sqlalchemy"):
+            raise StudyError(f"--storage {url}: cannot open it ({type(error).__name__}: {error})") from None
+        raise
+
+
+def _runs_digest(specs: list[RunSpec]) -> str:
+    """:return: a digest of every setting of every run (run ids alone do not name the budget or the room)"""
+    text = json.dumps([dataclasses.asdict(spec) for spec in specs], sort_keys=True, default=json_default)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
 def _check_study_runs(study: Any, specs: list[RunSpec], study_name: str) -> None:
     """
-    Record the run list in a new study, and refuse a study made for another list: its trials' run indices would
-    name other runs (or the grid's choices would not fit).
+    Record the job's runs (the digest of their settings) in a new study, and refuse a study made for other runs: its
+    trials' run indices would name other runs (or the grid's choices would not fit).
 
-    :raises StudyError: naming the study and the first run that differs
+    :raises StudyError: naming the study
     """
-    run_ids = [spec.run_id for spec in specs]
-    recorded = study.user_attrs.get("run_ids")
+    digest = _runs_digest(specs)
+    recorded = study.user_attrs.get("runs_digest")
     if recorded is None:
-        study.set_user_attr("run_ids", run_ids)
-    elif recorded != run_ids:
-        first = next(
-            (i for i, (a, b) in enumerate(zip(recorded, run_ids, strict=False)) if a != b), min(len(recorded), len(run_ids))
-        )
-        theirs = recorded[first] if first < len(recorded) else "none"
-        ours = run_ids[first] if first < len(run_ids) else "none"
+        study.set_user_attr("runs_digest", digest)
+        study.set_user_attr("n_runs", len(specs))
+    elif recorded != digest:
         raise StudyError(
-            f"--study-name {study_name}: the study hands out another job's runs ({len(recorded)} runs; run {first} is "
-            f"{theirs}, this job's {ours}): give each job, with its options, a study name of its own"
+            f"--study-name {study_name}: the study hands out the runs of another job ({study.user_attrs.get('n_runs')} "
+            "runs, other options: budget, seeds, preset, ...): give each job, with its options, a study name of its own"
         )
 
 

@@ -287,7 +287,9 @@ def check_identity(stored: dict[str, Any], expected: dict[str, Any], what: Path)
     rooms = stored.get("identity", {}).get("scenario"), expected.get("scenario")
     if all(isinstance(room, dict) for room in rooms) and rooms[0] != rooms[1]:  # the rooms' names first, then the fields
         first = next(i for i, text in enumerate(differences) if text.startswith("scenario."))
-        differences.insert(first, f"scenario: {rooms[0].get('name')!r} stored, {rooms[1].get('name')!r} now")
+        names = rooms[0].get("name"), rooms[1].get("name")
+        other = " (another room of that name)" if names[0] == names[1] else ""
+        differences.insert(first, f"scenario: {names[0]!r} stored, {names[1]!r} now{other}")
     if differences:
         shown = "; ".join(differences[:4]) + (f"; and {len(differences) - 4} more" if len(differences) > 4 else "")
         raise RunMismatchError(

@@ -233,9 +233,12 @@ def _locked_descriptor(path: Path, mode: int) -> int | None:
     import fcntl
 
     while True:
-        # read-only, created readable and writable as the umask allows: a lock file left by another user of a shared
-        # folder can still be locked (flock needs no write access), and removed by whoever may write the folder
-        fd = os.open(path, os.O_RDONLY | os.O_CREAT, 0o666)
+        # created readable and writable as the umask allows; opened for writing where it may be (an exclusive flock
+        # on NFS needs it), else read-only: a lock file another user of a shared folder left can still be locked
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        except PermissionError:
+            fd = os.open(path, os.O_RDONLY)
         try:
             fcntl.flock(fd, mode | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -43,18 +43,23 @@ _METRICS = ("success_rate", "mqi", "outage_steps", "mission_time")
 PAPER_MQI_SCALE = 1000.0
 
 
-def _mqi_scale(scenario: str | None, env_id: str | None = None) -> float:
+def _mqi_scale(scenario: str | None, env_id: str | None = None, content: Any = None) -> float:
     """``t_total`` (the largest possible MQI) of a run's scenario as its env id's task runs it (the paper's task:
-    1000); ``nan`` if it can no longer be loaded."""
+    1000): of the scenario content the run stored (its identity's), else of the scenario its spec names; ``nan`` if
+    neither can be read."""
     import gymnasium as gym
 
-    from noma_radiomap import load_scenario
+    from noma_radiomap import Scenario, load_scenario
     from noma_radiomap.core import task_scenario
 
     try:
         task = gym.spec(env_id).kwargs.get("task", "missions") if env_id else "missions"
     except gym.error.Error:  # an id no longer registered: the missions task, the default of every id
         task = "missions"
+    try:  # the stored content: a run is told by it, and it needs no file (one moved since is still this run)
+        return float(task_scenario(Scenario.from_dict(content), task).mission.t_total)
+    except (TypeError, ValueError, KeyError, AttributeError):
+        pass
     try:
         return float(task_scenario(load_scenario(scenario or "mall"), task).mission.t_total)
     except (OSError, ValueError, KeyError):
@@ -84,7 +89,9 @@ def run_records(results: Iterable[dict[str, Any]]) -> pd.DataFrame:
                 "tag": spec["tag"],
                 "seed": spec["seed"],
                 **{metric: summary[metric] for metric in _METRICS},
-                "mqi_scale": _mqi_scale(spec.get("scenario"), spec.get("env_id")),
+                "mqi_scale": _mqi_scale(
+                    spec.get("scenario"), spec.get("env_id"), (result.get("identity") or {}).get("scenario")
+                ),
                 "train_timesteps": train["timesteps"],
                 "train_wall_s": train["wall_s"],
             }
