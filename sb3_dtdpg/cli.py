@@ -786,7 +786,7 @@ class _HelpFormatter(argparse.HelpFormatter):
                 f"{name}: {BUDGETS[name].episodes} episodes on {BUDGETS[name].scenario or 'mall'}, "
                 f"{BUDGETS[name].seeds} seed{'s' if BUDGETS[name].seeds != 1 else ''}"
                 + (
-                    " (the paper's scale: compare 15-30 min on 2 cores, reproduce longer; docs/RESULTS.md)"
+                    " (the paper's scale, --budget paper: compare 15-30 min on 2 cores, reproduce longer; docs/RESULTS.md)"
                     if name == "paper"
                     else ""
                 )

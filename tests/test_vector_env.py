@@ -2,6 +2,7 @@
 Gymnasium vector-env contracts, and DT-DPG / the baselines training from it."""
 
 import dataclasses
+import json
 import re
 
 import gymnasium as gym
@@ -271,16 +272,16 @@ def test_baselines_train_from_the_vector_env(algo):
 def test_study_workers_share_the_runs(tmp_path):
     """Two workers on one JournalFile study run every run once, and a finished run is not run again."""
     from sb3_dtdpg.experiments.distributed import run_study_worker, study_specs
-    from sb3_dtdpg.experiments.runs import result_path
+    from sb3_dtdpg.experiments.runs import result_path, run_identity
 
     specs = study_specs("compare", "tiny", seeds=2)
     ran = []
 
-    def fake_run(spec, out):
+    def fake_run(spec, out):  # what a run leaves: its result file, with the run's identity
         ran.append(spec.run_id)
         path = result_path(out, spec)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text("{}")
+        path.write_text(json.dumps({"identity": run_identity(spec)}))
 
     storage = str(tmp_path / "study.log")
     first = run_study_worker(specs, tmp_path, storage, "job", n_runs=2, run=fake_run)
