@@ -153,6 +153,15 @@ def test_learning_curves_state_the_window_and_stay_in_range(tmp_path):
     assert "DT-DPG NOMA (3 seeds)" in labels and "DDPG NOMA (1 seed)" in labels
 
 
+def test_a_mean_cut_at_a_short_run_says_where_it_ends(tmp_path):
+    # one run of 10 episodes beside two of 40: the group's mean stops at 10 (it averages every run) and said nothing
+    rng = np.random.default_rng(3)
+    runs = [write_run(tmp_path / f"s{k}", rng.integers(0, 2, n)) for k, n in enumerate((40, 40, 10))]
+    figure = plots.plot_learning_curves({"A": runs, "B": runs[:2]}, tmp_path / "c.png", smooth=5)
+    labels = legend_texts(figure.legends[0])
+    assert "A (3 seeds, to episode 10 of 40)" in labels and "B (2 seeds)" in labels
+
+
 def test_learning_curves_of_one_seed_per_group_claim_no_ci(tmp_path):
     runs = [write_run(tmp_path / f"s{k}", np.random.default_rng(k).integers(0, 2, 20)) for k in range(2)]
     title, note = "Learning curves on small, tiny budget", {"band_note": True}  # compare's title

@@ -159,7 +159,8 @@ def plot_learning_curves(
     percentile-bootstrap CI band over the runs, against the training episode; DT-DPG's transfer episodes
     are marked by dotted lines. Each run's curve is the plain rolling mean of its per-episode values over
     ``smooth`` episodes (:func:`rolling_curve`), and the y label says so. A group of one run has no band; where
-    no group has two, the legend has no CI entry.
+    no group has two, the legend has no CI entry. A group's mean ends where its shortest run does (a run
+    interrupted, or of another budget), and its legend label then says to which episode.
 
     :param groups: group label -> the TensorBoard folders of its runs
     :param path: where to save the PNG
@@ -193,6 +194,9 @@ def plot_learning_curves(
             if any(logged for curve, logged in curves if len(curve)):
                 as_logged.add(tag)
             x, mean, low, high = _mean_band(series)
+            longest = max(float(curve.dropna().index.max()) for curve in series)
+            # the mean is over every run, so it ends where the shortest one does: the label says where, if sooner
+            cut = f", to episode {x[-1]:.0f} of {longest:.0f}" if x[-1] < longest else ""
             style = {"ls": _SERIES_STYLES[k % len(_SERIES_STYLES)], "marker": _SERIES_MARKERS[k % len(_SERIES_MARKERS)]}
             markevery = (k * max(len(x) // 40, 1), max(len(x) // 10, 1))  # staggered: markers of equal curves differ
             ax.plot(
@@ -203,7 +207,7 @@ def plot_learning_curves(
                 ms=5,
                 markevery=markevery,
                 **style,
-                label=f"{label} ({_count(len(series), 'seed')})",
+                label=f"{label} ({_count(len(series), 'seed')}{cut})",
             )
             if len(series) > 1:
                 ax.fill_between(x, low, high, color=colour, alpha=0.2, lw=0)
