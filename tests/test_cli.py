@@ -372,6 +372,7 @@ def test_the_transfer_dip_counts_the_seeds_whose_log_was_read(tmp_path):
     results = {spec.run_id: {"finished": True} for spec in experiments["learning_rates"]}
     dip = _dip_table(tmp_path, experiments, results)
     assert (dip["n"] == 0).all() and dip["final"].isna().all()
+    assert (dip[["transfer_episode_n", "before_n", "after_n", "final_n"]] == 0).all().all()  # each column's own count
     assert (tmp_path / "transfer_dip.csv").exists()
 
 

@@ -237,7 +237,8 @@ def _paired_table(
 
 
 def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[str, Any]) -> pd.DataFrame | None:
-    """MQI before and right after the transfer and at the end, per DT-DPG configuration (mean and CI over seeds)."""
+    """MQI before and right after the transfer and at the end, per DT-DPG configuration (mean and CI over seeds;
+    ``n``: the seeds whose log was read, ``<column>_n``: those with a value of that column)."""
     dips = []
     for spec in experiments["learning_rates"]:
         if results[spec.run_id] is not None:
@@ -249,6 +250,8 @@ def _dip_table(out: Path, experiments: dict[str, list[RunSpec]], results: dict[s
         row: dict[str, Any] = {"group": group, "n": int(part["final"].notna().sum())}  # seeds whose log was read
         for key in ("transfer_episode", "before", "after", "final"):
             row[key], row[f"{key}_ci"] = mean_ci(part[key].dropna().to_numpy())
+            # a run that transfers at its last episode has no "after": a column's own count of seeds
+            row[f"{key}_n"] = int(part[key].notna().sum())
         rows.append(row)
     dip = pd.DataFrame(rows)
     write_csv(out / "transfer_dip.csv", dip)
