@@ -653,7 +653,7 @@ def _summary_rows(
     outage_penalty: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """
-    The episode summaries of (M, U) robots, compiled: all arrived, the MQI
+    The episode summaries of (M, U) robots, compiled: all arrived, the MQI of Eq. (14)
     (:func:`~noma_radiomap.rewards.mission_quality_indicator`), the mission times and a copy of the outage counts.
     The MQI's sum over the robots runs left to right, like every sum over robots of the physics.
     """
@@ -687,8 +687,8 @@ def _link_rows(
 ) -> tuple[np.ndarray, np.ndarray]:
     """
     The links of (M, U) robots at ``positions`` (M, U, 2), compiled: each robot's row of the per-cell gain table
-    (AP first, then the interferers), times its fading powers (M, U, transmitters) unless ``fading`` is empty
-    (:func:`~noma_radiomap.propagation.faded_gain`); returns the AP gain and the interference
+    (AP first, then the interferers; Eq. (17)), times its fading powers (M, U, transmitters; Eq. (4)) unless
+    ``fading`` is empty (:func:`~noma_radiomap.propagation.faded_gain`); returns the AP gain and the interference
     ``sum_i P_i g_i`` summed left to right (:func:`~noma_radiomap.propagation.interference_power`), (M, U) each.
     """
     n_rows, n_robots = positions.shape[0], positions.shape[1]

@@ -52,7 +52,7 @@ class RewardConstants:
 def phase_weights(phase: str) -> dict[str, float]:
     """
     Weights of the reward components in a reward phase: the phase's reward is
-    ``sum(weights[k] * components[k])``.
+    ``sum(weights[k] * components[k])`` (Eq. (26) for ``destination``, Eq. (27) for ``mqi``).
 
     :param phase: one of :data:`REWARD_PHASES`
     :return: a weight (0 or 1) for each of :data:`REWARD_COMPONENTS`
@@ -66,7 +66,7 @@ def phase_weights(phase: str) -> dict[str, float]:
 @compiled
 def inducing_reward(distance: np.ndarray | float, d_max: float) -> np.ndarray | float:
     """
-    Inducing reward ``R_i = 1 - d / d_max`` (paper Sec. IV-E, destination training).
+    Inducing reward ``R_i = 1 - d / d_max`` (paper Sec. IV-E, a term of Eq. (26), destination training).
 
     :param distance: distances ``d`` of the robots to their destinations in metres, an array (..., U) or a float
     :param d_max: the largest possible distance (the room's diagonal, :attr:`Room.d_max`)

@@ -321,7 +321,7 @@ class BackpropNetworks:
     @th.no_grad()
     def critic_step(self, data: Any, target_q_values: th.Tensor, adam: Any) -> float:
         """
-        One update of the critic: MSE to the targets, its backward pass, the Adam step.
+        One update of the critic: MSE to the targets (Eq. (22)), its backward pass, the Adam step.
 
         :param data: The batch (``observations``, ``actions``)
         :param target_q_values: The bootstrapped targets
@@ -339,7 +339,7 @@ class BackpropNetworks:
     @th.no_grad()
     def actor_step(self, observations: th.Tensor, adam: Any) -> float:
         """
-        One update of the actor: ``-mean(Q(s, mu(s)))``, its backward pass through the critic, the Adam step.
+        One update of the actor: ``-mean(Q(s, mu(s)))`` (Eq. (21)), its backward pass through the critic, the Adam step.
 
         :param observations: The batch's observations
         :param adam: The actor's :class:`~sb3_dtdpg.dtdpg.lean.FusedAdamStep`

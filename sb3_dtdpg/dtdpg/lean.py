@@ -314,8 +314,8 @@ def _mean(values: list[float]) -> float:
 
 @th.no_grad()
 def _target_q_values(model: Any, data: Any, networks: BackpropNetworks | None) -> th.Tensor:
-    """The bootstrapped targets of TD3 (the minimum over the target critics), through the modules or the written-out
-    networks."""
+    """The bootstrapped targets of Eq. (23) (TD3's minimum over the target critics; ``gamma ** n`` of n-step returns),
+    through the modules or the written-out networks."""
     discounts = data.discounts if data.discounts is not None else model.gamma
     # The target noise is drawn as SB3 draws it (also when its scale is 0): the torch generator's stream stays the same
     noise = th.empty_like(data.actions).normal_(0, model.target_policy_noise)
@@ -331,7 +331,7 @@ def _target_q_values(model: Any, data: Any, networks: BackpropNetworks | None) -
 
 
 def _autograd_critic_step(model: Any, trainer: LeanTrainer, data: Any, target_q_values: th.Tensor) -> float:
-    """One update of the critic(s) through autograd (any networks); :return: the loss"""
+    """One update of the critic(s) through autograd (any networks), the loss of Eq. (22); :return: the loss"""
     current_q_values = model.critic(data.observations, data.actions)
     if len(current_q_values) == 1:
         critic_loss = F.mse_loss(current_q_values[0], target_q_values)
@@ -344,7 +344,7 @@ def _autograd_critic_step(model: Any, trainer: LeanTrainer, data: Any, target_q_
 
 
 def _autograd_actor_step(model: Any, trainer: LeanTrainer, observations: th.Tensor) -> float:
-    """One update of the actor through autograd (any networks); :return: the loss"""
+    """One update of the actor through autograd (any networks), the policy gradient of Eq. (21); :return: the loss"""
     actor_loss = -model.critic.q1_forward(observations, model.actor(observations)).mean()
     trainer.actor_adam.step(th.autograd.grad(actor_loss, trainer.actor_params, allow_unused=True))
     return actor_loss.item()
