@@ -147,7 +147,9 @@ class SavedModel:
                 f"{error}: the model {self.path} records no NomaRadioMap settings; if it was not trained on a mission "
                 "env, evaluate and enjoy cannot test it (they run the NomaRadioMap test missions)"
             ) from None
-        broken = [name for name, value in model.policy.state_dict().items() if not value.isfinite().all()]
+        from sb3_dtdpg.experiments.run_callbacks import non_finite
+
+        broken = non_finite(model.policy.state_dict().items())  # the running statistics of batch norm too
         if broken:
             raise ValueError(
                 f"the model {self.path} holds non-finite weights (NaN or inf) in {', '.join(broken[:3])}"

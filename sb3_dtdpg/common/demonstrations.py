@@ -6,6 +6,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 
+from sb3_dtdpg.common.checks import _is_int
 from sb3_dtdpg.evaluation import Planner
 
 #: What :class:`DemonstrationCallback` needs of a demonstrator: the :class:`sb3_dtdpg.evaluation.Planner` protocol.
@@ -50,7 +51,7 @@ class DemonstrationCallback(BaseCallback):
                 f"demonstrator must have the methods reset(env) and act(env, observation) (e.g. a planner), "
                 f"got {demonstrator!r}, which lacks {' and '.join(missing)}"
             )
-        if isinstance(n_episodes, (bool, np.bool_)) or not isinstance(n_episodes, (int, np.integer)) or n_episodes < 1:
+        if not _is_int(n_episodes) or n_episodes < 1:
             raise ValueError(f"n_episodes must be a positive integer, got {n_episodes!r}")
         self.demonstrator = demonstrator
         self.n_episodes = int(n_episodes)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -130,16 +131,22 @@ class PeriodicCheckpoint(BaseCallback):
             save_checkpoint(self.model, self.run_dir, self.identity, self.counter.n_episodes)
 
 
+def non_finite(tensors: Iterable[tuple[str, Any]]) -> list[str]:
+    """
+    :param tensors: named tensors, e.g. a policy's ``named_parameters()`` or ``state_dict().items()``
+    :return: the names of those holding NaN or infinite values
+    """
+    return [name for name, tensor in tensors if not bool(tensor.isfinite().all())]
+
+
 def check_finite(model: Any) -> None:
     """
     :param model: an SB3 model
     :raises RunDivergedError: a parameter of its policy is NaN or infinite
     """
-    import torch as th
-
-    for name, parameter in model.policy.named_parameters():
-        if not bool(th.isfinite(parameter).all()):
-            raise RunDivergedError(
-                f"training diverged at step {model.num_timesteps}: the policy's {name} holds non-finite values "
-                "(a learning rate or reward constants too large?)"
-            )
+    broken = non_finite(model.policy.named_parameters())
+    if broken:
+        raise RunDivergedError(
+            f"training diverged at step {model.num_timesteps}: the policy's {broken[0]} holds non-finite values "
+            "(a learning rate or reward constants too large?)"
+        )
