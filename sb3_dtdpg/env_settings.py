@@ -36,6 +36,7 @@ __all__ = [
     "record",
     "scenario_digest",
     "settings_of",
+    "split_observation",
     "trained_settings",
 ]
 
@@ -57,6 +58,8 @@ SETTINGS: tuple[str, ...] = (
 CHECKED: tuple[str, ...] = ("scenario", "observation", "multiple_access", "task", "power_mapping")
 
 
+#: Joins a recorded observation layout and the wrapper that extends it (a layout no ``gymnasium.make`` keyword builds).
+WRAPPED_MARK = "+"
 #: Settings left out of a suggested ``gymnasium.make`` call at these values (the defaults).
 _DEFAULTS: dict[str, Any] = {"power_mapping": "paper"}
 
@@ -83,12 +86,20 @@ def _layers(env: Any) -> Iterator[Any]:
 
 
 def _observation_of(env: Any) -> str | None:
-    """The layout an agent sees: the env's own, or ``goal`` behind a ``RelativeGoalObservation`` wrapper."""
+    """
+    The layout an agent sees: the env's own; behind a ``RelativeGoalObservation`` wrapper ``goal`` where the wrapper
+    makes the ``goal`` layout of ``destinations`` (same values), else the inner layout and the wrapper, e.g.
+    ``"paper+RelativeGoalObservation(distance_scale=10.0)"`` (:data:`WRAPPED_MARK`: no keyword builds it).
+    """
+    from noma_radiomap.observations import DISTANCE_SCALE
     from noma_radiomap.wrappers import RelativeGoalObservation
 
     for layer in _layers(env):
         if isinstance(layer, RelativeGoalObservation):
-            return "goal"
+            inner = _observation_of(layer.env)
+            if inner == "destinations" and layer.distance_scale == DISTANCE_SCALE:
+                return "goal"
+            return f"{inner}{WRAPPED_MARK}RelativeGoalObservation(distance_scale={layer.distance_scale!r})"
         if isinstance(getattr(layer, "observation", None), str):  # the envs and the batched envs say it themselves
             return layer.observation
     return None
@@ -228,8 +239,24 @@ def _make_call(settings: dict[str, Any]) -> str:
     shown = {key: settings.get(key) for key in CHECKED if settings.get(key) not in (None, _DEFAULTS.get(key))}
     if file := _scenario_file_of(settings):  # a scenario of a file: the file builds it, its name would be the built-in
         shown["scenario"] = file
+    layout, wrapper = split_observation(settings.get("observation"))
+    if wrapper:
+        shown["observation"] = layout
     arguments = ", ".join(f"{key}={value!r}" for key, value in shown.items())
-    return f'gym.make("NomaRadioMap-v0", {arguments})'
+    call = f'gym.make("NomaRadioMap-v0", {arguments})'
+    return f"{wrapper[:-1]}, env={call})" if wrapper else call
+
+
+def split_observation(observation: Any) -> tuple[Any, str | None]:
+    """
+    :param observation: a recorded observation layout
+    :return: the layout an env is built with and the wrapper around it (e.g. ``"RelativeGoalObservation(distance_scale=
+        4.0)"``), None where the layout is the env's own
+    """
+    if isinstance(observation, str) and WRAPPED_MARK in observation:
+        layout, wrapper = observation.split(WRAPPED_MARK, 1)
+        return layout, wrapper
+    return observation, None
 
 
 def _scenario_file_of(settings: dict[str, Any]) -> str | None:
@@ -271,8 +298,14 @@ def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the m
         if scenario is None and recorded.get("scenario_digest") == builtin_scenario_digest(str(recorded.get("scenario"))):
             scenario = recorded.get("scenario")
         scenario_option = f"--scenario {scenario} " if scenario else ""
+        if split_observation(recorded.get("observation"))[1]:
+            cli = "no sb3-dtdpg option builds a wrapped env"
+        else:
+            cli = (
+                f"sb3-dtdpg: {scenario_option}--observation {recorded.get('observation')} "
+                f"--multiple-access {recorded.get('multiple_access')}"
+            )
         raise EnvSettingsMismatch(
             f"{what} was trained with {', '.join(differences)}; build the env with those settings, e.g. "
-            f"{_make_call(recorded)} (sb3-dtdpg: {scenario_option}--observation {recorded.get('observation')} "
-            f"--multiple-access {recorded.get('multiple_access')})"
+            f"{_make_call(recorded)} ({cli})"
         )

@@ -25,6 +25,7 @@ from sb3_dtdpg.env_settings import (
     check_settings,
     describe_scenario,
     scenario_digest,
+    split_observation,
 )
 from sb3_dtdpg.experiments.storage import RUN_RECORDS
 
@@ -79,7 +80,8 @@ class SavedModel:
             scenario is the recorded file's path where the model was trained on a scenario file other than the
             built-in of its name)
         :raises ValueError: the model was trained on a scenario of a file that no longer holds it (changed, moved),
-            or of no file, and no ``scenario`` override is given
+            or of no file, and no ``scenario`` override is given; or on observations of a wrapper (e.g.
+            ``RelativeGoalObservation``) and no ``observation`` override is given
         """
         settings = self.settings or {}
         kwargs: dict[str, Any] = {"channel": channel}
@@ -87,6 +89,11 @@ class SavedModel:
             value = overrides.get(key)
             if value is None:
                 value = self._recorded_scenario() if key == "scenario" else settings.get(key)
+            if key == "observation" and split_observation(value)[1]:
+                raise ValueError(
+                    f"the model {self.path} was trained on observations of a wrapper ({value}); the CLI builds "
+                    "unwrapped envs only: wrap the env in Python and use the model there"
+                )
             if value is not None:
                 kwargs[key] = value
         return kwargs

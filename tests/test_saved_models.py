@@ -85,6 +85,28 @@ def test_record_works_for_any_sb3_model(tmp_path):
     assert DDPG.load(tmp_path / "ddpg.zip").env_settings["multiple_access"] == "oma"
 
 
+def test_a_relative_goal_wrapper_is_recorded_as_the_features_it_makes(tmp_path, capsys):
+    from noma_radiomap.wrappers import RelativeGoalObservation
+
+    # on "destinations" at the default 10 m the wrapper makes exactly the "goal" layout: recorded as it
+    assert settings_of(RelativeGoalObservation(small_env(observation="destinations")))["observation"] == "goal"
+    # at another scale (same length as "goal", other values) or on another layout it is recorded as the wrapper
+    scaled = RelativeGoalObservation(small_env(observation="destinations"), distance_scale=4.0)
+    recorded = "destinations+RelativeGoalObservation(distance_scale=4.0)"
+    assert settings_of(scaled)["observation"] == recorded
+    assert settings_of(RelativeGoalObservation(small_env(observation="paper")))["observation"] == (
+        "paper+RelativeGoalObservation(distance_scale=10.0)"
+    )
+    DTDPG("MlpPolicy", scaled, seed=0).save(tmp_path / "scaled.zip")
+    DTDPG.load(tmp_path / "scaled.zip", env=RelativeGoalObservation(small_env(observation="destinations"), 4.0))
+    with pytest.raises(EnvSettingsMismatch, match=re.escape(f"observation='{recorded}' (the env has 'goal')")) as error:
+        DTDPG.load(tmp_path / "scaled.zip", env=small_env(observation="goal"))  # was loaded: "goal" recorded
+    assert "RelativeGoalObservation(distance_scale=4.0, env=gym.make(" in str(error.value)
+    assert "observation='destinations'" in str(error.value)
+    code, output = run_cli(["evaluate", str(tmp_path / "scaled.zip"), "--n-episodes", "1"], capsys)
+    assert code == 2 and "trained on observations of a wrapper" in output.err and recorded in output.err
+
+
 def run_cli(argv, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(argv)

@@ -56,7 +56,9 @@ def _n_step_samples(
     discounts: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """SB3's ``NStepReplayBuffer._get_samples`` for flat observations, one sample at a time: the same float32
-    operations in the same order (each return is the sum of ``r_k d_k m_k`` in numpy's order, :func:`_numpy_sum`)."""
+    operations in the same order (each return is the sum of ``r_k d_k m_k`` in numpy's order, :func:`_numpy_sum`).
+    The n-step return extends the one-step target of Eq. (23): ``y_t = sum_{k<n} gamma^k R_{t+k} +
+    gamma^n Q'(S_{t+n}, mu'(S_{t+n}))``; this gathers its first sum, the final state and whether it is terminal."""
     batch, size = batch_inds.shape[0], rewards.shape[0]
     obs = np.empty((batch, observations.shape[2]), observations.dtype)
     next_obs = np.empty((batch, next_observations.shape[2]), next_observations.dtype)

@@ -100,8 +100,9 @@ class LinearDecayOUNoise(ActionNoise):
     """
     Ornstein-Uhlenbeck action noise whose scale falls linearly per episode, the exploration noise of DT-DPG
     (Zhong et al., "Path Design and Resource Management for NOMA enhanced Indoor Intelligent Robots",
-    Section IV-B: "linearly diminishing OU noise", the noise scale being a function of the training task and
-    the episode number, updated at the start of every episode, Algorithm 1).
+    Section IV-B: the action ``A_t = mu(S_t) + N(0, xi)`` of Eq. (20) with "linearly diminishing OU noise", the
+    scale ``xi(X, E)`` a function of the training task and the episode number, updated at the start of every
+    episode, Algorithm 1).
 
     In episode ``k`` (counting from 0 since construction or the last :meth:`rearm`) the scale is
     ``sigma_k = sigma + (final_sigma - sigma) * k / decay_episodes`` for ``k < decay_episodes``, then
