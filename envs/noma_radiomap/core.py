@@ -25,7 +25,7 @@ from noma_radiomap.motion import GridMotion, move_robots
 from noma_radiomap.observations import GAIN_DB_RANGE, Observer, check_observation, default_observation
 from noma_radiomap.propagation import dbm_to_watt, linear_to_db, rayleigh_fading
 from noma_radiomap.radiomap import RadioMap, check_missions_memory
-from noma_radiomap.rewards import component_rows, weighted_rows
+from noma_radiomap.rewards import component_rows, mqi_rows, weighted_rows
 from noma_radiomap.sampling import MissionSampler
 from noma_radiomap.scenario import Scenario, load_scenario
 
@@ -421,7 +421,6 @@ class MissionCore:
         result = transmission_result(sinr, order, self._bandwidth_per_robot_hz, noma)
         outage = in_outage(result.rate_bps, radio.qos_rate_bps) & active
         constants, mission = self.reward_constants, self.scenario.mission
-        summarise = self.n_robots <= _SEQUENTIAL_SUM_MAX
         values, reward, terminated, truncated, success, mqi, mission_time, outage_steps = _outcome_rows(
             row_indices,
             active,
@@ -439,12 +438,8 @@ class MissionCore:
             self.max_steps,
             mission.t_total,
             mission.outage_penalty,
-            summarise,
         )
-        if summarise:
-            summary = {"is_success": success, "mqi": mqi, "mission_time": mission_time, "outage_steps": outage_steps}
-        else:
-            summary = self.episode_summaries(rows)
+        summary = {"is_success": success, "mqi": mqi, "mission_time": mission_time, "outage_steps": outage_steps}
         return MissionStep(
             rows=row_indices,
             reward=reward,
@@ -502,26 +497,18 @@ class MissionCore:
         """
         self.check_reset(rows)
         mission = self.scenario.mission
-        arrived = self.arrived[rows]
-        if self.n_robots > _SEQUENTIAL_SUM_MAX:  # numpy's sum adds 8 or more terms pairwise: its bits
-            mission_time = np.where(arrived, self.arrival_steps[rows], self.max_steps).astype(np.int64)
-            outage_steps = self.outage_steps[rows].copy()
-            mqi = rewards.mission_quality_indicator(mission.t_total, mission_time, outage_steps, mission.outage_penalty)
-            return {
-                "is_success": arrived.all(axis=-1),
-                "mqi": np.asarray(mqi, dtype=np.float64),
-                "mission_time": mission_time,
-                "outage_steps": outage_steps,
-            }
         success, mqi, mission_time, outage_steps = _summary_rows(
-            arrived, self.arrival_steps[rows], self.outage_steps[rows], self.max_steps, mission.t_total, mission.outage_penalty
+            self.arrived[rows],
+            self.arrival_steps[rows],
+            self.outage_steps[rows],
+            self.max_steps,
+            mission.t_total,
+            mission.outage_penalty,
         )
         return {"is_success": success, "mqi": mqi, "mission_time": mission_time, "outage_steps": outage_steps}
 
 
 _NO_FADING = np.zeros((0, 0, 0))
-#: Up to this many robots numpy's ``sum`` adds left to right, as :func:`_summary_rows` does; beyond, pairwise.
-_SEQUENTIAL_SUM_MAX = 7
 
 
 @compiled
@@ -607,15 +594,14 @@ def _outcome_rows(
     max_steps: int,
     t_total: float,
     mqi_outage_penalty: float,
-    summarise: bool,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """
     The rest of one step of the missions ``rows``, compiled in one call: the reward components
     (:func:`~noma_radiomap.rewards.component_rows`) and the reward with each mission's phase weights ((5, N)
     ``weights``; :func:`~noma_radiomap.rewards.weighted_rows`), the bookkeeping in place on the (N, ...) state
-    (:func:`_record_step`) and, when ``summarise``, the episode summaries as of the step (:func:`_summary_rows`;
-    empty arrays otherwise). Returns the components (5, rows), the rewards, terminated, truncated and the summary's
-    all-arrived flags, MQIs, mission times and outage counts.
+    (:func:`_record_step`) and the episode summaries as of the step (:func:`_summary_rows`). Returns the
+    components (5, rows), the rewards, terminated, truncated and the summary's all-arrived flags, MQIs, mission
+    times and outage counts.
     """
     values = component_rows(active, arriving, outage, distance, d_max, *reward_constants)
     row_weights = np.empty((weights.shape[0], len(rows)))
@@ -625,18 +611,6 @@ def _outcome_rows(
     terminated, truncated = _record_step(
         rows, arriving, outage, arrived, step_counts, arrival_steps, outage_steps, max_episode_steps
     )
-    if not summarise:
-        n_robots = arrived.shape[1]
-        return (
-            values,
-            reward,
-            terminated,
-            truncated,
-            np.empty(0, dtype=np.bool_),
-            np.empty(0),
-            np.empty((0, n_robots), dtype=np.int64),
-            np.empty((0, n_robots), dtype=np.int64),
-        )
     success, mqi, mission_time, outage_counts = _summary_rows(
         arrived[rows], arrival_steps[rows], outage_steps[rows], max_steps, t_total, mqi_outage_penalty
     )
@@ -654,25 +628,21 @@ def _summary_rows(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """
     The episode summaries of (M, U) robots, compiled: all arrived, the MQI of Eq. (14)
-    (:func:`~noma_radiomap.rewards.mission_quality_indicator`), the mission times and a copy of the outage counts.
-    The MQI's sum over the robots runs left to right, like every sum over robots of the physics.
+    (:func:`~noma_radiomap.rewards.mqi_rows`, its sum over the robots left to right), the mission times and a copy
+    of the outage counts.
     """
     n_rows, n_robots = arrived.shape
     success = np.empty(n_rows, dtype=np.bool_)
-    mqi = np.empty(n_rows)
     mission_time = np.empty((n_rows, n_robots), dtype=np.int64)
     outage = np.empty((n_rows, n_robots), dtype=np.int64)
     for row in range(n_rows):
-        all_arrived, total = True, 0.0
+        all_arrived = True
         for u in range(n_robots):
             mission_time[row, u] = arrival_steps[row, u] if arrived[row, u] else max_steps
             outage[row, u] = outage_steps[row, u]
             all_arrived &= arrived[row, u]
-            term = mission_time[row, u] + outage_penalty * outage[row, u]
-            total = term if u == 0 else total + term
         success[row] = all_arrived
-        mqi[row] = t_total - total
-    return success, mqi, mission_time, outage
+    return success, mqi_rows(t_total, mission_time, outage, outage_penalty), mission_time, outage
 
 
 @compiled

@@ -88,12 +88,43 @@ def equivalent_gain(gain: np.ndarray, interference_w: np.ndarray, noise_w: float
 def decoding_order(equivalent_gains: np.ndarray) -> np.ndarray:
     """
     SIC decoding order (paper Eq. (9) and the ordering below it): robot indices sorted from the weakest to the strongest
-    equivalent gain. Ties are broken by robot index (a lower index counts as weaker).
+    equivalent gain. Ties are broken by robot index (a lower index counts as weaker). :func:`decoding_order_rows`,
+    the one implementation (the env's SIC kernels call it too).
 
     :param equivalent_gains: ``G_u``, shape (..., U)
     :return: integer indices, shape (..., U)
     """
-    return np.argsort(equivalent_gains, axis=-1, kind="stable")
+    gains = np.asarray(equivalent_gains, dtype=np.float64)
+    rows = (int(np.prod(gains.shape[:-1], dtype=np.int64)), gains.shape[-1])
+    return decoding_order_rows(gains.reshape(rows)).reshape(gains.shape)
+
+
+@compiled
+def decoding_order_rows(equivalent_gains: np.ndarray) -> np.ndarray:
+    """:func:`decoding_order` of (M, U) equivalent gains, compiled: per row a stable sort (numba's mergesort; the
+    order of numpy's stable sort)."""
+    order = np.empty(equivalent_gains.shape, dtype=np.int64)
+    for row in range(equivalent_gains.shape[0]):
+        order[row] = np.argsort(equivalent_gains[row], kind="mergesort")
+    return order
+
+
+@compiled
+def band_and_noise(n_robots: int, bandwidth_per_robot_hz: float, noise_w_per_hz: float, noma: bool) -> tuple[float, float]:
+    """
+    The band a robot's signal occupies and the noise power over it, per multiple-access mode (docs/MODEL.md, NOMA
+    and OMA; the ``B`` of paper Eq. (12) and the noise of Eq. (8) and (11)): NOMA, the whole cluster band
+    ``W = U B`` and ``N0 W``; OMA, the robot's own band ``B`` and ``N0 B``. Compiled (the kernels, the downlink,
+    the radio map and the planners call it): the one implementation.
+
+    :param n_robots: ``U``
+    :param bandwidth_per_robot_hz: ``B`` in Hz
+    :param noise_w_per_hz: ``N0`` in W/Hz
+    :param noma: NOMA (True) or OMA
+    :return: the band in Hz and the noise power over it in watts
+    """
+    band_hz = n_robots * bandwidth_per_robot_hz if noma else bandwidth_per_robot_hz
+    return band_hz, noise_w_per_hz * band_hz
 
 
 @compiled
@@ -149,10 +180,9 @@ def sic_rows(
     """:func:`noma_sinr` of (M, U) robots, compiled: per row the decoding order (:func:`decoding_order`: a
     stable sort), then the SINRs from the strongest robot down, the power of the stronger ones summed on the way."""
     sinr = np.empty(power_w.shape)
-    order = np.empty(power_w.shape, dtype=np.int64)
+    order = decoding_order_rows(equivalent_gain(gain, interference_w, noise_w))
     for row in range(power_w.shape[0]):
-        row_order = np.argsort(equivalent_gain(gain[row], interference_w[row], noise_w), kind="mergesort")
-        order[row] = row_order
+        row_order = order[row]
         stronger = 0.0
         for k in range(power_w.shape[1] - 1, -1, -1):
             u = row_order[k]
@@ -260,14 +290,13 @@ def sinr_rows(
     modes (:func:`decoding_order`). Float64 arrays of exactly that shape.
     """
     n_robots = power_w.shape[1]
-    cluster_noise_w = noise_w_per_hz * (n_robots * bandwidth_per_robot_hz)
+    cluster_noise_w = band_and_noise(n_robots, bandwidth_per_robot_hz, noise_w_per_hz, True)[1]
     if noma:
         return sic_rows(power_w, gain, interference_w, cluster_noise_w)
-    robot_noise_w = noise_w_per_hz * bandwidth_per_robot_hz
+    robot_noise_w = band_and_noise(n_robots, bandwidth_per_robot_hz, noise_w_per_hz, False)[1]
     sinr = np.empty(power_w.shape)
-    order = np.empty(power_w.shape, dtype=np.int64)
+    order = decoding_order_rows(equivalent_gain(gain, interference_w, cluster_noise_w))
     for row in range(power_w.shape[0]):
-        order[row] = np.argsort(equivalent_gain(gain[row], interference_w[row], cluster_noise_w), kind="mergesort")
         for u in range(n_robots):
             sinr[row, u] = fdma_sinr(power_w[row, u], gain[row, u], interference_w[row, u], n_robots, robot_noise_w)
     return sinr, order
@@ -278,7 +307,7 @@ def transmission_result(sinr: np.ndarray, order: np.ndarray, bandwidth_per_robot
     The outcome of a transmission from its linear SINRs (..., U): the rates (paper Eq. (12), over the cluster band
     ``W = U B`` in NOMA and over ``B`` in OMA), the SINRs in dB and the decoding order as given.
     """
-    band_hz = sinr.shape[-1] * bandwidth_per_robot_hz if noma else bandwidth_per_robot_hz
+    band_hz = band_and_noise(sinr.shape[-1], bandwidth_per_robot_hz, 0.0, noma)[0]
     return DownlinkResult(rate_bps=shannon_rate(sinr, band_hz), sinr_db=sinr_to_db(sinr), decoding_order=order)
 
 

@@ -104,7 +104,7 @@ def occupancy_grid(boxes: np.ndarray, width: float, depth: float, resolution: fl
 
 def height_matrices(boxes: np.ndarray, width: float, depth: float, resolution: float) -> tuple[np.ndarray, np.ndarray]:
     """
-    The paper's layout matrices ``L_bottom`` and ``L_top`` (Section III-B): per cell, the lowest
+    The paper's layout matrices ``L_bottom`` and ``L_top`` (Eq. (16), Section III-B): per cell, the lowest
     bottom and the highest top of the stack of snapped boxes covering it (0 where the cell is empty).
     They summarise the layout; the 3D boxes remain the source of truth.
 

@@ -15,21 +15,43 @@ from noma_radiomap import geometry
 from noma_radiomap.compiled import compiled
 from noma_radiomap.scenario import Room
 
-_TINY = float(np.finfo(np.float64).tiny)
-
 
 def clip_displacements(actions: np.ndarray, max_step: float) -> np.ndarray:
     """
-    Map motion actions to displacements (docs/MODEL.md, motion): ``(dx, dy) in [-1, 1]^2`` scaled by
-    ``max_step = V_max time_step``, then shortened to a norm of at most ``max_step``.
+    Map motion actions to displacements (paper Eq. (25): the amplitude of ``Delta D_u`` in ``[0, V_max]`` per step;
+    docs/MODEL.md, motion): ``(dx, dy) in [-1, 1]^2`` scaled by ``max_step = V_max time_step``, then shortened to a
+    norm of at most ``max_step`` (:func:`clipped_displacement` per robot, the motion kernel's own).
 
     :param actions: motion actions, shape (..., 2); clipped to [-1, 1]
     :param max_step: the longest displacement of one step, in metres
-    :return: displacements in metres, shape (..., 2)
+    :return: displacements in metres, float64 of shape (..., 2)
     """
-    step = np.clip(actions, -1.0, 1.0) * max_step
-    norm = np.sqrt((step * step).sum(axis=-1, keepdims=True))
-    return step * np.minimum(1.0, max_step / np.maximum(norm, _TINY))
+    actions = np.asarray(actions, dtype=np.float64)
+    return displacement_rows(actions.reshape(-1, 2), float(max_step)).reshape(actions.shape)
+
+
+@compiled
+def clipped_displacement(action_x: float, action_y: float, max_step: float, n_parts: int) -> tuple[float, float]:
+    """
+    The displacement of one motion action (paper Eq. (25); :func:`clip_displacements`), split into ``n_parts`` equal
+    parts: ``(dx, dy)`` clipped to ``[-1, 1]``, times ``max_step``, shortened to a norm (:func:`~noma_radiomap.
+    geometry.hypot`) of at most ``max_step``, divided by ``n_parts`` (the sub-steps of :func:`move_robots`; 1: the
+    whole displacement). Compiled, on floats; the one implementation of the clip.
+    """
+    dx = min(max(action_x, -1.0), 1.0) * max_step
+    dy = min(max(action_y, -1.0), 1.0) * max_step
+    norm = geometry.hypot(dx, dy)
+    scale = max_step / norm / n_parts if norm > max_step else 1.0 / n_parts
+    return dx * scale, dy * scale
+
+
+@compiled
+def displacement_rows(actions: np.ndarray, max_step: float) -> np.ndarray:
+    """:func:`clip_displacements` of (M, 2) actions, compiled: :func:`clipped_displacement` of each row, whole."""
+    displacements = np.empty(actions.shape)
+    for row in range(actions.shape[0]):
+        displacements[row, 0], displacements[row, 1] = clipped_displacement(actions[row, 0], actions[row, 1], max_step, 1)
+    return displacements
 
 
 class GridMotion:
@@ -198,8 +220,10 @@ def move_robots(
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """
     The rules of :class:`GridMotion` on every robot (rows): motion ``actions`` (M, 2) from free ``positions``
-    (M, 2), :func:`clip_displacements` on floats. Returns the new positions, the arrived flags, and the first
-    row whose position is not free (-1: none; nothing is moved then).
+    (M, 2), the displacement of paper Eq. (25) (:func:`clipped_displacement`, in sub-steps) with the wall sliding
+    of its Sec. IV-D, keeping every robot on the floor's free cells and inside the room (the constraints (15b) and
+    (15d) of the paper's problem (15)). Returns the new positions, the arrived flags, and the first row whose
+    position is not free (-1: none; nothing is moved then).
     """
     nx, ny = blocked.shape
     margin = 1e-9 * (1.0 + width + depth)
@@ -216,11 +240,7 @@ def move_robots(
         x, y = positions[row, 0], positions[row, 1]
         gx, gy = goals[row, 0], goals[row, 1]
         if active[row]:
-            dx = min(max(actions[row, 0], -1.0), 1.0) * max_step
-            dy = min(max(actions[row, 1], -1.0), 1.0) * max_step
-            norm = geometry.hypot(dx, dy)
-            scale = max_step / norm / n_substeps if norm > max_step else 1.0 / n_substeps
-            sx, sy = dx * scale, dy * scale
+            sx, sy = clipped_displacement(actions[row, 0], actions[row, 1], max_step, n_substeps)
             ix, iy = geometry.axis_cell(x, resolution, nx), geometry.axis_cell(y, resolution, ny)
             # Fast path: no blocked cell and no wall in the box around the whole move -> no collision test.
             end_x, end_y = x + n_substeps * sx, y + n_substeps * sy

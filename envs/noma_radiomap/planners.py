@@ -33,7 +33,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from noma_radiomap import geometry
 from noma_radiomap.compiled import compiled
-from noma_radiomap.downlink import allocate_power, decoding_order, downlink, equivalent_gain, in_outage
+from noma_radiomap.downlink import allocate_power, band_and_noise, decoding_order, downlink, equivalent_gain, in_outage
 from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import dbm_to_watt
 
@@ -384,11 +384,18 @@ class CommAwarePlanner(GridPlanner):
         return self._grid[best]
 
 
-def _qos_sinr(scenario: Any, multiple_access: str) -> float:
-    """The SINR a robot needs to meet the QoS rate: ``2^(R / bandwidth) - 1`` (NOMA: ``W = U B``, OMA: ``B``)."""
+def _band_and_noise(scenario: Any, multiple_access: str) -> tuple[float, float]:
+    """A robot's band in Hz and the noise power over it in watts in the mode (NOMA: ``W = U B``, OMA: ``B``;
+    :func:`~noma_radiomap.downlink.band_and_noise`, the env's)."""
     radio = scenario.radio
-    band = radio.bandwidth_per_robot_hz * (scenario.n_robots if multiple_access == "noma" else 1)
-    return float(2.0 ** (radio.qos_rate_bps / band) - 1.0)
+    noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
+    return band_and_noise(scenario.n_robots, radio.bandwidth_per_robot_hz, noise_w_per_hz, multiple_access == "noma")
+
+
+def _qos_sinr(scenario: Any, multiple_access: str) -> float:
+    """The SINR a robot needs to meet the QoS rate: ``2^(R / band) - 1`` (NOMA: ``W = U B``, OMA: ``B``)."""
+    band, _ = _band_and_noise(scenario, multiple_access)
+    return float(2.0 ** (scenario.radio.qos_rate_bps / band) - 1.0)
 
 
 def _least_powers(
@@ -401,13 +408,12 @@ def _least_powers(
     are set from the strongest served robot down: ``p_u = gamma (g_u P_stronger + I_u + N0 W) / g_u``. OMA:
     ``p_u = gamma (I_u / U + N0 B) / g_u``, each robot on its own band.
     """
-    radio, n_robots = scenario.radio, scenario.n_robots
-    noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
+    n_robots = scenario.n_robots
     gamma = _qos_sinr(scenario, multiple_access)
+    _, noise_w = _band_and_noise(scenario, multiple_access)
     if multiple_access == "oma":
-        need = gamma * (interference_w / n_robots + noise_w_per_hz * radio.bandwidth_per_robot_hz) / gain
+        need = gamma * (interference_w / n_robots + noise_w) / gain
         return np.where(served, need, 0.0)
-    noise_w = noise_w_per_hz * radio.bandwidth_per_robot_hz * n_robots
     order = decoding_order(equivalent_gain(gain, interference_w, noise_w))  # weakest first
     power = np.zeros(gain.shape)
     stronger = np.zeros(gain.shape[:-1])
@@ -966,15 +972,14 @@ def rayleigh_success(
     :param multiple_access: ``"noma"`` or ``"oma"``
     :return: the probabilities, shape (..., K, U)
     """
-    radio, n_robots = scenario.radio, scenario.n_robots
-    noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
+    n_robots = scenario.n_robots
     gamma = _qos_sinr(scenario, multiple_access)
+    _, noise = _band_and_noise(scenario, multiple_access)
     g = gain[..., None, :]
     m = interferer_w[..., None, :, :]
     if multiple_access == "oma":
-        useful, noise, m = g * power_w, noise_w_per_hz * radio.bandwidth_per_robot_hz, m / n_robots
+        useful, m = g * power_w, m / n_robots
     else:
-        noise = noise_w_per_hz * radio.bandwidth_per_robot_hz * n_robots
         order = decoding_order(equivalent_gain(gain, interferer_w.sum(axis=-1), noise))  # weakest first
         rank = np.argsort(order, axis=-1)[..., None, :]  # each robot's place in the order
         # The power of the robots stronger than each robot: those with a higher rank.

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from noma_radiomap import geometry
-from noma_radiomap.downlink import in_outage, shannon_rate
+from noma_radiomap.downlink import band_and_noise, in_outage, shannon_rate
 from noma_radiomap.propagation import (
     EXPECTED_FADING_DB,
     db_to_linear,
@@ -190,6 +190,19 @@ def _size(n_bytes: int) -> str:
     return f"{n_bytes / 2**30:.2f} GiB" if n_bytes >= 2**30 else f"{n_bytes / 2**20:.1f} MiB"
 
 
+def antenna_distance(transmitter_xyz: np.ndarray, receivers_xyz: np.ndarray) -> np.ndarray:
+    """
+    Distance from a transmitter's antenna to receivers' antennas (paper Eq. (18)),
+    ``d = sqrt(h_m^2 + (x - x_m)^2 + (y - y_m)^2)`` with ``h_m`` their height difference (docs/MODEL.md: the
+    path loss clips it to ``d >= 1 m``).
+
+    :param transmitter_xyz: the transmitter's antenna ``(x, y, z)`` in metres
+    :param receivers_xyz: the receivers' antennas, (..., 3) in metres
+    :return: the distances in metres, shape (...)
+    """
+    return np.linalg.norm(np.asarray(receivers_xyz) - np.asarray(transmitter_xyz), axis=-1)
+
+
 class RadioMap:
     """
     Radio map of a scenario, built once (use :meth:`for_scenario` for the shared, cached instance).
@@ -200,7 +213,8 @@ class RadioMap:
     - ``bottom``, ``top``: the paper's layout height matrices (:func:`~noma_radiomap.geometry.height_matrices`);
     - ``n_obstacles[name]``: distinct obstacles crossed from transmitter ``name`` (``"ap"`` or an
       interferer's name) to each cell;
-    - ``path_loss_db[name]``: path loss (paper Eq. (1)-(3)) from each transmitter;
+    - ``path_loss_db[name]``: path loss (paper Eq. (1)-(3)) from each transmitter, at the distance of Eq. (18)
+      (:func:`antenna_distance`);
     - ``path_gain[name]``: linear path gain without fading, ``10^(-path_loss_db / 10)`` (the Rayleigh
       channel multiplies it by ``|h|^2`` every step);
     - ``gain[name]``: linear channel gain with the expected fading
@@ -250,7 +264,7 @@ class RadioMap:
         self.gain: dict[str, np.ndarray] = {}
         for name, (position, _) in self.transmitters.items():
             counts = geometry.count_obstacles(position, receivers, self.boxes, self.box_owner)
-            distance = np.linalg.norm(receivers - position, axis=1)
+            distance = antenna_distance(position, receivers)
             loss = path_loss_db(
                 distance,
                 counts,
@@ -265,8 +279,9 @@ class RadioMap:
             self.path_gain[name] = path_gain(self.path_loss_db[name])
             self.gain[name] = expected_channel_gain(self.path_loss_db[name])
 
-        #: Cluster bandwidth ``W = U x B`` (Hz) and the noise power over it (dBm).
-        self.bandwidth_hz = scenario.n_robots * radio.bandwidth_per_robot_hz
+        #: Cluster bandwidth ``W = U x B`` (Hz, the NOMA band of :func:`~noma_radiomap.downlink.band_and_noise`) and
+        #: the noise power over it (dBm, from the noise density in dBm/Hz: the map's dB scale).
+        self.bandwidth_hz = band_and_noise(scenario.n_robots, radio.bandwidth_per_robot_hz, 0.0, True)[0]
         self.noise_dbm = float(noise_power_dbm(radio.noise_dbm_per_hz, self.bandwidth_hz))
         self.power_map_dbm = scenario.ap.max_power_dbm + self.gain_db["ap"]
         names = [i.name for i in scenario.interferers]

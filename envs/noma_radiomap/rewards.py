@@ -113,8 +113,9 @@ def reward_components(
 @compiled
 def weighted_rows(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """
-    :func:`weighted_reward` of (5, M) component values with (5, M) weights (a phase per mission), compiled:
-    per mission ``0.0 + w_0 c_0 + w_1 c_1 + ...``, summed in the order of :data:`REWARD_COMPONENTS`.
+    The weighted reward of Eq. (26) and (27) (:func:`weighted_reward`) of (K, M) component values with (K, M)
+    weights (the env: the 5 components of :data:`REWARD_COMPONENTS`, a phase per mission), compiled: per mission
+    ``0.0 + w_0 c_0 + w_1 c_1 + ...``, summed in row order.
     """
     reward = np.empty(values.shape[1])
     for row in range(values.shape[1]):
@@ -160,29 +161,56 @@ def component_rows(
 
 def weighted_reward(components: Mapping[str, np.ndarray], weights: Mapping[str, float]) -> np.ndarray:
     """
-    The reward ``sum_k weights[k] * components[k]``, summed in the order of ``components``.
+    The reward ``sum_k weights[k] * components[k]`` (Eq. (26) and (27) with the weights of
+    :func:`phase_weights`), summed in the order of ``components``: :func:`weighted_rows`, the one implementation.
 
     :param components: the reward components (:func:`reward_components`), arrays of shape (...)
     :param weights: a weight per component (:func:`phase_weights`), or an array of weights per mission
         broadcastable to the components (the vector env); missing components weigh 0
-    :return: the reward, shape (...)
+    :return: the reward, float64 of shape (...)
     """
-    reward = 0.0
-    for name, value in components.items():
-        reward = reward + weights.get(name, 0.0) * value
-    return np.asarray(reward)
+    values = [np.asarray(value, dtype=np.float64) for value in components.values()]
+    factors = [np.asarray(weights.get(name, 0.0), dtype=np.float64) for name in components]
+    shape = np.broadcast_shapes(*(array.shape for array in values + factors))
+    rows = (len(values), int(np.prod(shape, dtype=np.int64)))
+    stacked_values, stacked_weights = (
+        np.array([np.broadcast_to(array, shape) for array in arrays]).reshape(rows) for arrays in (values, factors)
+    )
+    return weighted_rows(stacked_values, stacked_weights).reshape(shape)
 
 
 def mission_quality_indicator(
     t_total: float, mission_time: np.ndarray, outage_steps: np.ndarray, outage_penalty: float
 ) -> np.ndarray:
     """
-    Mission quality indicator ``MQI = T_total - sum_u (T_u + lambda T_out_u)`` (paper Eq. (14)).
+    Mission quality indicator ``MQI = T_total - sum_u (T_u + lambda T_out_u)`` (paper Eq. (14)) of missions with
+    robots on the last axis: :func:`mqi_rows`, the one implementation (the env's episode summaries call it too).
 
     :param t_total: ``T_total``, the MQI budget
     :param mission_time: ``T_u``, steps until each robot arrived (``max_steps`` if it never did), (..., U)
     :param outage_steps: steps each robot spent in outage, (..., U)
     :param outage_penalty: ``lambda``
-    :return: the MQI, shape (...)
+    :return: the MQI, float64 of shape (...)
     """
-    return t_total - (np.asarray(mission_time) + outage_penalty * np.asarray(outage_steps)).sum(axis=-1)
+    arrays = [np.asarray(value, dtype=np.float64) for value in (mission_time, outage_steps)]
+    shape = np.broadcast_shapes(*(array.shape for array in arrays))
+    rows = (int(np.prod(shape[:-1], dtype=np.int64)), shape[-1])
+    mission_time, outage_steps = (np.broadcast_to(array, shape).reshape(rows) for array in arrays)
+    return mqi_rows(float(t_total), mission_time, outage_steps, float(outage_penalty)).reshape(shape[:-1])
+
+
+@compiled
+def mqi_rows(t_total: float, mission_time: np.ndarray, outage_steps: np.ndarray, outage_penalty: float) -> np.ndarray:
+    """
+    The MQI of Eq. (14), ``T_total - sum_u (T_u + lambda T_out_u)``, of (M, U) robots, compiled: one per row, the
+    sum over the robots left to right (like every sum over robots of the env), so a batch gives the bits of its
+    missions one by one.
+    """
+    mqi = np.empty(mission_time.shape[0])
+    for row in range(mission_time.shape[0]):
+        total = 0.0
+        for u in range(mission_time.shape[1]):
+            term = mission_time[row, u] + outage_penalty * outage_steps[row, u]
+            total = term if u == 0 else total + term
+        mqi[row] = t_total - total
+    return mqi
