@@ -161,10 +161,19 @@ def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
     return overrides
 
 
+#: The networks of a ``net_arch`` dict, as SB3's off-policy policies read it (``get_actor_critic_arch``)
+_NET_ARCH_KEYS = ("pi", "qf")
+
+
 def _check_net_arch(net_arch: Any, where: str) -> None:
+    if isinstance(net_arch, dict) and sorted(net_arch) != sorted(_NET_ARCH_KEYS):
+        raise HyperparameterError(
+            f"net_arch{where}: a dict gives the actor's and the critics' layers, keys exactly 'pi' and 'qf' (e.g. "
+            f"dict(pi=[64, 64], qf=[400, 300])), got the keys {list(net_arch)}"
+        )
     stacks = net_arch.values() if isinstance(net_arch, dict) else [net_arch]
     for stack in stacks:
-        if not isinstance(stack, Sequence) or isinstance(stack, str):
+        if not isinstance(stack, list):  # SB3 takes lists only (a tuple fails its assertion)
             raise HyperparameterError(f"net_arch{where}: expected a list of layer sizes, got {net_arch!r}")
         for size in stack:
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:

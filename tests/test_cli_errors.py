@@ -41,6 +41,10 @@ def assert_one_error_line(code, printed, command, message):
         (["--hyperparams", "learnin_rate:1e-3"], "unknown hyperparameter 'learnin_rate' for DTDPG"),
         (["--hyperparams", "learning_rate:0"], "learning_rate (--hyperparams) must be a positive finite number"),
         (["--hyperparams", "policy_kwargs:dict(net_arch=[100000, 100000])"], "more than the 20,000,000 allowed"),
+        # were SB3's AssertionError tracebacks
+        (["--hyperparams", "policy_kwargs:dict(net_arch=dict(pi=[64]))"], "keys exactly 'pi' and 'qf' (e.g."),
+        (["--hyperparams", "policy_kwargs:dict(net_arch=dict(pi=[8], qf=[8], vf=[8]))"], "got the keys ['pi', 'qf', 'vf']"),
+        (["--hyperparams", "policy_kwargs:dict(net_arch=(64, 64))"], "expected a list of layer sizes, got (64, 64)"),
         (["--hyperparams", "batch_size"], "expected key:value"),
         (["--hyperparams", "gamma:__import__('os')"], "is not a Python literal"),
         # were tracebacks after --out was made (the check built the model without its networks and buffer)
