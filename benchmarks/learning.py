@@ -19,6 +19,7 @@ import argparse
 import csv
 import json
 import os
+import shutil
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from typing import Any
@@ -75,6 +76,9 @@ def run_phase1(seed: int, args: argparse.Namespace, slot: int) -> dict[str, Any]
 
     th.set_num_threads(1)
     run_dir = os.path.join(args.out, f"seed_{seed}")
+    # A benchmark run into an earlier one's --out starts each seed afresh (its report is replaced too): the
+    # curriculum refuses to write over phase files another run left in its folder
+    shutil.rmtree(run_dir, ignore_errors=True)
     os.makedirs(run_dir, exist_ok=True)
     env = gym.make(args.env)
     phases = _phases(args.phase1_episodes, args.phase2_episodes, "keep")

@@ -7,8 +7,11 @@ paired by seed) and the reference planners' rows on the same test missions::
     python benchmarks/paper_task_merge.py results/paper_task_a/paper_task_runs.csv \\
         results/paper_task_b/paper_task_runs.csv --out results/paper_task_merged
 
-Merge runs of one room only: the planners' rows are those of today's room, and the CSVs do not say which room
-their runs trained on (docs/csv/mall_2026-12-03/ holds runs of the room before its last calibration).
+Merge runs of one budget and room only: the planners' rows are those of ``--budget``'s room today. The CSVs
+record each run's room (``scenario``), test missions (``eval_episodes``) and ``configuration`` (a digest of
+everything that decides its result but the seed), and runs of two budgets with the same training episodes (the
+same run ids) are refused rather than merged as one; CSVs written before those columns existed do not say which
+room their runs trained on (docs/csv/mall_2026-12-03/ holds runs of the room before its last calibration).
 
 The runs trained with Rayleigh fading (``paper_task_reality_runs.csv``) merge the same way into
 ``paper_task_reality*`` tables: the training channel is read from the runs' ``training`` column, and runs of
@@ -21,11 +24,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
-from sb3_dtdpg.experiments.budgets import PUBLIC_BUDGETS, get_budget
-from sb3_dtdpg.experiments.paper_task import merge_runs, table_name, task_episodes, write_tables
+from sb3_dtdpg.experiments.budgets import PUBLIC_BUDGETS, Budget, get_budget
+from sb3_dtdpg.experiments.paper_task import BUDGET_COLUMNS, merge_runs, table_name, task_episodes, write_tables
 
 #: The columns of ``paper_task_runs.csv`` that the merge and the tables read
 REQUIRED_COLUMNS = (
@@ -63,12 +67,18 @@ def read_runs(path: Path) -> pd.DataFrame:
     return records
 
 
+def _budget_value(budget: Budget, column: str) -> Any:
+    """:return: what the runs of ``budget`` record in a column of :data:`BUDGET_COLUMNS`"""
+    return (budget.scenario or "mall") if column == "scenario" else getattr(budget, column)
+
+
 def check_budget_episodes(name: str, records: pd.DataFrame, channel: str) -> None:
     """
     :param name: the ``--budget`` given
     :param records: the merged runs, all trained on ``channel``
     :param channel: their training channel
-    :raises ValueError: naming the budget, its episodes and the runs' episodes when they differ
+    :raises ValueError: naming the budget, its training episodes, room or test missions, and the runs' where they
+        differ (the room and the test missions where the runs record them: CSVs of earlier versions do not)
     """
     budget = get_budget(name)
     expected = task_episodes(budget, channel)
@@ -80,6 +90,23 @@ def check_budget_episodes(name: str, records: pd.DataFrame, channel: str) -> Non
             f"--budget {name}: {expected} training episodes per {channel} run, but the runs trained "
             f"{', '.join(map(str, episodes))} ({hint})"
         )
+    for column in BUDGET_COLUMNS:
+        found = sorted(records[column].dropna().unique().tolist(), key=str) if column in records else []
+        if found and found != [_budget_value(budget, column)]:
+            matching = [
+                other
+                for other in PUBLIC_BUDGETS
+                if task_episodes(get_budget(other), channel) == expected
+                and all(
+                    c not in records or records[c].dropna().eq(_budget_value(get_budget(other), c)).all()
+                    for c in BUDGET_COLUMNS
+                )
+            ]
+            hint = f"give --budget {' or '.join(matching)}" if matching else "no budget has these runs' settings"
+            raise ValueError(
+                f"--budget {name}: {column} {_budget_value(budget, column)!r}, but the runs have {column} "
+                f"{', '.join(map(repr, found))} ({hint})"
+            )
 
 
 def main() -> None:

@@ -22,6 +22,7 @@ The settings sets (``hyperparams``, ``--hyperparams`` of the CLI) are :mod:`sb3_
 from __future__ import annotations
 
 import inspect
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -252,6 +253,11 @@ def make_env(
     return Monitor(gym.make(env_id, **kwargs), info_keywords=("is_success",))
 
 
+#: Constructor arguments SB3 writes into (DDPG adds ``n_critics=1`` to ``policy_kwargs``, SAC and TQC ``use_sde``; an
+#: n-step buffer of SB3's choice adds ``n_steps`` and ``gamma`` to ``replay_buffer_kwargs``): a model gets a copy.
+_WRITTEN_BY_SB3 = ("policy_kwargs", "replay_buffer_kwargs")
+
+
 def make_model(
     algo: str,
     env: gym.Env,
@@ -275,7 +281,8 @@ def make_model(
     :param verbose: SB3 verbosity
     :param hyperparams: ``"paper"`` (Table I) or ``"tuned"`` (``dtdpg`` and ``ddpg`` only), :mod:`sb3_dtdpg.presets`;
         DT-DPG gets the set's mission curriculum on a mission env (on another env: the env's own or one phase)
-    :param kwargs: further constructor arguments, passed on as is
+    :param kwargs: further constructor arguments, passed on as is (``policy_kwargs`` and ``replay_buffer_kwargs`` as
+        copies: SB3 adds its own keys to them, which would change the next model built from the caller's dict)
     :return: the (untrained) model
     """
     algo = _check_algo(algo)
@@ -286,6 +293,9 @@ def make_model(
         options["learning_rate"] = learning_rate
     options.update(kwargs)
     check_off_policy_settings(algo, options)
+    for name in _WRITTEN_BY_SB3:  # the caller's dicts stay as given (one dict may build several models)
+        if isinstance(options.get(name), Mapping):
+            options[name] = dict(options[name])
     check_action_noise(algo, options.get("action_noise"), env.action_space.shape)
     return _CLASSES[algo]("MlpPolicy", env, seed=seed, tensorboard_log=tensorboard_log, verbose=verbose, **options)
 

@@ -224,7 +224,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.threads:
         th.set_num_threads(args.threads)
     env, mission = _train_env(args)
-    given = ",".join(f"{name}:{value!r}" for name, value in args.overrides.items())  # SB3 adds to policy_kwargs
+    given = ",".join(f"{name}:{value!r}" for name, value in args.overrides.items())
     with _user_errors(args):  # what the constructor refuses, before anything is written
         try:
             make_model(
@@ -271,7 +271,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
         args.algo,
         multiple_access,
         args.seed,
-        args.episodes,
+        None if args.timesteps is not None else args.episodes,  # the budget it trains for, not --episodes' default
         channel=channel,
         learning_rate=args.learning_rate,
         env_id=args.env,

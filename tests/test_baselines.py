@@ -92,3 +92,24 @@ def test_paper_learning_rates():
         base_learning_rate("dtdpg", "fast")
     with pytest.raises(ValueError, match="'tuned' is defined for 'dtdpg' and 'ddpg' only, got algo='td3'"):
         make_model("td3", make_env("td3", env_kwargs={"scenario": "small"}), hyperparams="tuned")
+
+
+def test_building_a_model_leaves_the_callers_dicts_as_given():
+    # DDPG wrote n_critics=1 into the policy_kwargs it was given: a TD3 built next from the same dict had one critic
+    from sb3_dtdpg.presets import model_settings
+
+    env_kwargs = {"scenario": "small"}
+    policy_kwargs, buffer_kwargs = {"net_arch": [16, 16]}, {"handle_timeout_termination": True}
+    given = {"policy_kwargs": policy_kwargs, "n_steps": 3, "replay_buffer_kwargs": buffer_kwargs, "learning_starts": 10}
+    for algo in ("ddpg", "dtdpg", "sac", "td3"):
+        make_model(algo, make_env(algo, env_kwargs=env_kwargs), seed=0, **given)
+        assert policy_kwargs == {"net_arch": [16, 16]} and buffer_kwargs == {"handle_timeout_termination": True}, algo
+    td3 = make_model("td3", make_env("td3", env_kwargs=env_kwargs), seed=0, **given)
+    assert len(td3.critic.q_networks) == 2  # TD3's twin critics (was 1, DDPG's)
+    # two runs of one settings dict build the same nets, whatever was built between them
+    settings = [model_settings(make_model("ddpg", make_env("ddpg", env_kwargs=env_kwargs), seed=0, **given)) for _ in "ab"]
+    assert settings[0] == settings[1] and settings[0]["policy_kwargs"] == {"net_arch": [16, 16], "n_critics": 1}
+    assert model_settings(td3) == model_settings(make_model("td3", make_env("td3", env_kwargs=env_kwargs), seed=0, **given))
+    # DTDPG itself, built directly, copies them too
+    DTDPG("MlpPolicy", make_env("dtdpg", env_kwargs=env_kwargs), policy_kwargs=policy_kwargs, _init_setup_model=False)
+    assert policy_kwargs == {"net_arch": [16, 16]}

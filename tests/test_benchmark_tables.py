@@ -195,6 +195,25 @@ def test_paper_task_merge_refuses_a_budget_of_other_episodes(merge, tmp_path, mo
         merge.check_budget_episodes("paper", both, "radio_map")
 
 
+def test_paper_task_merge_refuses_runs_of_another_budget_with_the_same_episodes(merge, tmp_path, monkeypatch, capsys):
+    # small-200 and mall-200 both train 200 episodes: --budget mall-200 drew mall's planners beside small's runs
+    runs = tmp_path / "job" / "paper_task_runs.csv"
+    runs.parent.mkdir()
+    task_records(200).assign(scenario="small", eval_episodes=20).to_csv(runs, index=False)
+    code, _, err = run_main(merge, monkeypatch, capsys, runs, "--budget", "mall-200", "--out", tmp_path / "merged")
+    assert_option_error(code, err, "--budget mall-200: scenario 'mall'", "the runs have scenario 'small'", "small-200")
+    assert not (tmp_path / "merged").exists()
+    with pytest.raises(ValueError, match=r"eval_episodes 20, but the runs have eval_episodes 5 \(no budget has"):
+        merge.check_budget_episodes("paper", task_records(500).assign(eval_episodes=5), "radio_map")
+    # and two folders of the two budgets' runs, same ids: refused, not merged as one
+    other = tmp_path / "other" / "paper_task_runs.csv"
+    other.parent.mkdir()
+    task_records(200).assign(scenario="mall", eval_episodes=20).to_csv(other, index=False)
+    code, _, err = run_main(merge, monkeypatch, capsys, runs, other, "--budget", "mall-200", "--out", tmp_path / "merged")
+    assert_option_error(code, err, "the runs are of several budgets (scenario: 'mall', 'small')")
+    assert not (tmp_path / "merged").exists()
+
+
 def test_paper_task_merge_refuses_a_csv_of_another_kind(merge, tmp_path, monkeypatch, capsys):
     other = tmp_path / "learner_gap.csv"
     gap_missions().to_csv(other, index=False)

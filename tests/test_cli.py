@@ -129,9 +129,41 @@ def test_a_timestep_budget_sizes_the_destination_phase_by_the_episodes_it_holds(
     from sb3_dtdpg.baselines import make_env
     from sb3_dtdpg.experiments.specs import build_model
 
-    spec = RunSpec("dtdpg", "noma", 0, 500, scenario="small", timesteps=600, hyperparams="paper")
+    spec = RunSpec("dtdpg", "noma", 0, None, scenario="small", timesteps=600, hyperparams="paper")
     env = make_env("dtdpg", spec.env_id, "noma", "radio_map", spec.env_kwargs)
     assert build_model(spec, env, _init_setup_model=False).phases[0].n_episodes == 6
+
+
+def test_a_timestep_budget_is_recorded_as_such_not_with_the_unused_episodes_default(tmp_path, monkeypatch, capsys):
+    # train --timesteps recorded episodes=500 (--episodes' default, unused) in the run's spec and identity
+    from sb3_dtdpg.experiments.specs import RunMismatchError, check_identity
+
+    seen = []
+
+    def record_spec(spec, *args, **kwargs):
+        seen.append(spec)
+        raise KeyboardInterrupt  # the spec is all this test needs: no training
+
+    monkeypatch.setattr(runs, "run_one", record_spec)
+    argv = ["train", "--algo", "ddpg", "--scenario", "small", "--timesteps", "300", "--out", str(tmp_path)]
+    assert main([*argv, "--hyperparams", "learning_starts:100", "--no-progress"]) == 130
+    (spec,) = seen
+    assert (spec.episodes, spec.timesteps) == (None, 300)
+    identity = run_identity(spec)
+    assert (identity["spec"]["episodes"], identity["spec"]["timesteps"]) == (None, 300)
+    # a run stored with the unused count is still this run (same training), one of another budget is not
+    stored = json.loads(json.dumps(identity))
+    stored["spec"]["episodes"] = 500
+    check_identity({"identity": stored}, identity, tmp_path / "result.json")
+    stored["spec"]["timesteps"] = 600
+    with pytest.raises(RunMismatchError, match=r"spec.timesteps: 600 stored, 300 now"):
+        check_identity({"identity": stored}, identity, tmp_path / "result.json")
+    # an episode budget's identity is as before (stored runs keep theirs), and a spec is one budget or the other
+    assert run_identity(dataclasses.replace(spec, episodes=3, timesteps=None))["spec"]["episodes"] == 3
+    with pytest.raises(ValueError, match=r"got episodes=3 and timesteps=300"):
+        dataclasses.replace(spec, episodes=3)
+    with pytest.raises(ValueError, match=r"got episodes=None and timesteps=None"):
+        dataclasses.replace(spec, timesteps=None)
 
 
 def test_reproduce_skips_finished_runs(tmp_path):

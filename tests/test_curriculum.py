@@ -2,6 +2,7 @@
 
 import copy
 import os
+import re
 
 import numpy as np
 import pytest
@@ -180,6 +181,34 @@ def test_training_from_phase_checkpoint_enters_next_phase(algo, tmp_path):
     assert loaded.curriculum_state["phase_index"] == 1
     assert probe.steps[0]["env_phase"] == "mqi" and probe.steps[0]["sigma"] == pytest.approx(0.3)
     np.testing.assert_allclose(probe.steps[0]["rewards"], probe.steps[0]["components"] @ W["mqi"], rtol=1e-6)
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_a_second_run_into_the_same_folder_is_refused_not_written_over_the_first(algo, tmp_path):
+    # Two fresh curricula into one folder: the second overwrote the first's phase_*.zip
+    model, curriculum = make_model(algo, make_env(), two_phases(), save_path=tmp_path)
+    learn(model, curriculum, 80)
+    first = {path.name: path.read_bytes() for path in tmp_path.iterdir()}
+    assert sorted(first) == ["phase_0_destination.zip", "phase_1_mqi.zip"]
+    other, curriculum = make_model(algo, make_env(seed=1), two_phases(), save_path=tmp_path, seed=1)
+    message = f"save_path (DTDPG: curriculum_save_path) {str(tmp_path)!r} already holds phase_0_destination.zip, "
+    with pytest.raises(ValueError, match=re.escape(message + "phase_1_mqi.zip of an earlier curriculum run")):
+        learn(other, curriculum, 80)
+    assert other.num_timesteps == 0 and {path.name: path.read_bytes() for path in tmp_path.iterdir()} == first
+    # the run itself goes on writing there: another learn(), or a model loaded from its phase file
+    learn(model, curriculum if algo is DTDPG else CurriculumTransferCallback(two_phases(), save_path=tmp_path), 20)
+    assert (tmp_path / "phase_1_mqi.zip").read_bytes() != first["phase_1_mqi.zip"]
+    env = make_env()
+    loaded = type(model).load(tmp_path / "phase_0_destination.zip", env=env, device="cpu")
+    if algo is DTDPG:
+        loaded.curriculum_save_path = str(tmp_path)
+    learn(loaded, None if algo is DTDPG else CurriculumTransferCallback(two_phases(), save_path=tmp_path), 20)
+    assert loaded.curriculum_state["phase_index"] == 1
+    # ... and the second run in a folder of its own
+    if algo is DTDPG:
+        other.curriculum_save_path = str(tmp_path / "second")
+    learn(other, None if algo is DTDPG else CurriculumTransferCallback(two_phases(), save_path=tmp_path / "second"), 80)
+    assert sorted(os.listdir(tmp_path / "second")) == ["phase_0_destination.zip", "phase_1_mqi.zip"]
 
 
 @pytest.mark.parametrize("algo", ALGOS)

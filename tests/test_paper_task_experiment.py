@@ -146,3 +146,54 @@ def test_runs_of_two_folders_merge_into_one_table_and_conflicts_are_refused():
     ]
     with pytest.raises(ValueError, match="run DDPG_tuned seed 1: different results"):
         paper_task.merge_runs([earlier, runs("tuned", "DDPG", [1], mqi=5.0)])
+
+
+def test_a_seed_without_training_logs_leaves_the_others_summarised_and_says_how_many(tmp_path):
+    # seed 2 has no training log: its row was all "-" and the claim "n/a", for the two seeds that have one
+    specs = [s for s in paper_task.paper_task_specs(MICRO, seeds=3, modes=("noma",)) if s.hyperparams == "paper"]
+    results = {}
+    for spec in specs:
+        if spec.seed != 2:
+            _write_successes(tmp_path / "tb" / spec.run_id, [1] + [0] * 9 if spec.algo == "ddpg" else [1] * 9 + [0])
+        results[spec.run_id] = _fake_result(spec, mqi=100.0 + spec.seed)
+    summary = paper_task.paper_task_tables(tmp_path, MICRO, specs, results, progress=False).set_index("algorithm")
+    assert summary.loc["DDPG", "train_success"] == pytest.approx(0.1) and summary.loc["DDPG", "train_success_ci"] == 0.0
+    assert summary.loc["DDPG", ["n", "train_n"]].tolist() == [3, 2]
+    assert summary.loc["DT-DPG", "train_success_last"] == pytest.approx(0.9)
+    assert summary.loc["DDPG", "paper_claim"] == "< 20 %: holds"
+    assert summary.loc["DDPG", "mqi"] == pytest.approx(101.0)  # the test metrics of all three seeds
+    table = (tmp_path / "paper_task.md").read_text()
+    assert "| paper | DDPG | NOMA | 3 seeds (2 with training logs) | 10.0 ± 0.0 |" in table
+    paired = pd.read_csv(tmp_path / "paper_task_paired.csv").iloc[0]
+    assert (paired["n"], paired["train_n"]) == (3, 2) and paired["train_success"] == pytest.approx(0.8)
+    assert "| DT-DPG - DDPG | paper | NOMA | 3 (2 with training logs) | 80.0 ± 0.0 |" in table
+    # every seed logged: the cells as before
+    for spec in (s for s in specs if s.seed == 2):
+        _write_successes(tmp_path / "tb" / spec.run_id, [1] + [0] * 9 if spec.algo == "ddpg" else [1] * 9 + [0])
+    paper_task.paper_task_tables(tmp_path, MICRO, specs, results, progress=False)
+    assert "| paper | DDPG | NOMA | 3 seeds | 10.0 ± 0.0 |" in (tmp_path / "paper_task.md").read_text()
+
+
+def test_runs_of_two_budgets_with_the_same_ids_are_not_merged_as_one(tmp_path):
+    # mall-200 and small-200 train the paper task 200 episodes: the same run ids. The merge kept one budget's runs as
+    # the other's duplicates (same seeds), or one configuration of both budgets' seeds (other seeds)
+    def records(budget, seed, **spec_fields):
+        specs = paper_task.paper_task_specs(get_budget(budget), seeds=1, modes=("noma",))
+        specs = [dataclasses.replace(s, seed=seed, **spec_fields) for s in specs if s.hyperparams == "paper"]
+        return paper_task._records(tmp_path, specs, {s.run_id: _fake_result(s, mqi=100.0) for s in specs})
+
+    mall = records("mall-200", 0)
+    for seed in (0, 1):
+        with pytest.raises(ValueError, match=r"the runs are of several budgets \(scenario: 'mall', 'small'\)"):
+            paper_task.merge_runs([mall, records("small-200", seed)])
+    assert mall[["scenario", "eval_episodes"]].drop_duplicates().values.tolist() == [["mall", 20]]
+    # the seeds of one configuration share one digest; a run of the same id and other settings has another
+    later = records("mall-200", 1)
+    assert later["configuration"].tolist() == mall["configuration"].tolist()
+    assert len(paper_task.merge_runs([mall, later])) == 4
+    other = records("mall-200", 1, eval_seed=7)
+    with pytest.raises(ValueError, match=r"runs of dtdpg_noma_paper_task_200: several configurations under one id"):
+        paper_task.merge_runs([mall, other])
+    # a CSV written before these columns existed merges as before, also with the same runs' newer rows
+    older = mall.drop(columns=["scenario", "eval_episodes", "configuration"])
+    assert len(paper_task.merge_runs([older, mall, later])) == 4

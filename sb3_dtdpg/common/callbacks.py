@@ -63,7 +63,9 @@ class CurriculumTransferCallback(BaseCallback):
     no action noise, a :class:`sb3_dtdpg.common.noise.LinearDecayOUNoise` is created for it.
 
     :param phases: The phases in training order (:class:`sb3_dtdpg.common.phases.Phase` or dicts of their fields).
-    :param save_path: Folder for the per-phase checkpoints (None: no checkpoints); an existing file is refused.
+    :param save_path: Folder for the per-phase checkpoints (None: no checkpoints); an existing file is refused, and
+        so is a new curriculum (a model without ``curriculum_state``) where the folder holds its phase files already
+        (another run's: each run saves into its own folder).
     :param reinitialize_at_transfer: Ablation: re-initialise the networks at each transfer instead of carrying them
         over (needs a model with ``reinitialize()``, e.g. :class:`sb3_dtdpg.DTDPG`).
     :param eval_callbacks: ``EvalCallback`` objects whose eval envs follow the curriculum's reward phase.
@@ -136,6 +138,7 @@ class CurriculumTransferCallback(BaseCallback):
         self._stop = False
         state = getattr(self.model, "curriculum_state", None)
         if not state:
+            self._check_no_earlier_run()
             self.model.curriculum_state = {  # type: ignore[attr-defined]
                 "phase_names": [phase.name for phase in self.phases],
                 "phase_index": 0,
@@ -315,6 +318,23 @@ class CurriculumTransferCallback(BaseCallback):
             self.logger.record("curriculum/noise_sigma", sigma)
 
     # ------------------------------------------------------------------ checks
+    def _check_no_earlier_run(self) -> None:
+        """
+        A new curriculum (no ``curriculum_state`` yet) would overwrite the phase files another run left in
+        ``save_path``: refused before the first step. A model that trained before, or one loaded from a phase file
+        or a checkpoint, carries its curriculum state and continues writing its own phase files there.
+        """
+        if self.save_path is None:
+            return
+        paths = [self.checkpoint_path(i) for i in range(len(self.phases))]
+        found = [os.path.basename(path) for path in paths if path is not None and os.path.lexists(path)]
+        if found:
+            raise ValueError(
+                f"save_path (DTDPG: curriculum_save_path) {self.save_path!r} already holds {', '.join(found)} of an "
+                "earlier curriculum run, which this new run would overwrite: give each run its own folder, or move "
+                "those files elsewhere"
+            )
+
     def _check_setup(self) -> None:
         env = self.training_env
         if self.reinitialize_at_transfer and not callable(getattr(self.model, "reinitialize", None)):

@@ -100,7 +100,8 @@ class DTDPG(LeanStep, DDPG):
         (YAML). None: :func:`~sb3_dtdpg.common.phases.default_curriculum`, the env's own ``default_curriculum``
         when it offers one, else a single phase that leaves the reward alone.
     :param curriculum_save_path: Folder where the model is saved at the end of each phase
-        (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved. An existing file there is refused.
+        (``phase_<k>_<name>.zip``, the paper's theta_X); None: not saved. An existing file there is refused, and so
+        is a first ``learn()`` where the folder holds these phase files already (an earlier run's: one folder per run).
         Not saved with the model (a copy of a run would write into the original's folder): give it to
         :meth:`load` again to keep saving the phases.
     :param reinitialize_at_transfer: Re-initialise the networks at each transfer instead of carrying
@@ -164,6 +165,7 @@ class DTDPG(LeanStep, DDPG):
             policy_kwargs=policy_kwargs,
         )
         check_off_policy_settings("DTDPG", settings)
+        settings["policy_kwargs"] = None if policy_kwargs is None else dict(policy_kwargs)  # DDPG adds n_critics to it
         check_switches(
             "DTDPG",
             dict(

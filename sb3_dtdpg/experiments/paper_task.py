@@ -23,7 +23,7 @@ from sb3_dtdpg.evaluation import mean_ci
 from sb3_dtdpg.experiments import plots, tables
 from sb3_dtdpg.experiments.budgets import Budget
 from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, compare_specs, evaluate_planners
-from sb3_dtdpg.experiments.specs import RunSpec
+from sb3_dtdpg.experiments.specs import RunSpec, identity_digest
 
 __all__ = [
     "ENV_ID",
@@ -46,7 +46,9 @@ PRESETS = ("paper", "tuned")
 LAST_EPISODES = 100
 #: The paper's claim: DDPG below, DT-DPG above these training success rates.
 PAPER_CLAIM = {"DDPG": ("<", 0.20), "DT-DPG": (">", 0.95)}
-_METRICS = ("train_success", "train_success_first", "train_success_last", "success_rate", "mqi")
+#: The rates read from a run's training log (NaN where none was read): summarised over the seeds that have one
+_TRAINING = ("train_success", "train_success_first", "train_success_last")
+_METRICS = (*_TRAINING, "success_rate", "mqi")
 
 
 def task_episodes(budget: Budget, channel: str = "radio_map") -> int:
@@ -118,15 +120,36 @@ def _records(out: Path, specs: Sequence[RunSpec], results: dict[str, Any]) -> pd
     records["train_success_first"] = [r[1] for r in rates]
     records["train_success_last"] = [r[2] for r in rates]
     records["train_episodes"] = [r[3] for r in rates]
+    # what tells a run from one of another budget under the same id (merge_runs): its room, its test missions and
+    # its identity less the seed (one value for the seeds of one configuration)
+    stored = [results[s.run_id] for s in finished]
+    records["scenario"] = [_room(result) for result in stored]
+    records["eval_episodes"] = [result["spec"].get("eval_episodes") for result in stored]
+    records["configuration"] = [
+        identity_digest(r["identity"], seed=False) if isinstance(r.get("identity"), dict) else None for r in stored
+    ]
     return records
 
 
+def _room(result: dict[str, Any]) -> str:
+    """:return: the name of the room a run trained in: its identity's scenario, else its spec's (None: ``mall``)"""
+    content = (result.get("identity") or {}).get("scenario")
+    if isinstance(content, dict) and isinstance(content.get("name"), str):
+        return content["name"]
+    return result["spec"].get("scenario") or "mall"
+
+
 def _summary(records: pd.DataFrame) -> pd.DataFrame:
+    """One row per preset, algorithm and mode: ``n`` seeds (the test metrics), ``train_n`` of them with a training
+    log (the training success rates: a seed without one no longer blanks the row's)."""
     rows = []
     for (preset, algorithm, mode), group in records.groupby(["preset", "algorithm", "multiple_access"], sort=False):
+        logged = group["train_success"].notna()
         row: dict[str, Any] = {"preset": preset, "algorithm": algorithm, "multiple_access": mode, "n": len(group)}
+        row["train_n"] = int(logged.sum())
         for metric in _METRICS:
-            row[metric], row[f"{metric}_ci"] = mean_ci(group[metric].to_numpy(dtype=float))
+            values = group.loc[logged, metric] if metric in _TRAINING else group[metric]
+            row[metric], row[f"{metric}_ci"] = mean_ci(values.to_numpy(dtype=float))
         claim = PAPER_CLAIM.get(algorithm)
         if claim is not None:
             side, bar = claim
@@ -136,6 +159,23 @@ def _summary(records: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _paired(records: pd.DataFrame) -> pd.DataFrame:
+    """DT-DPG - DDPG by seed per preset and mode: the test metrics on the ``n`` seeds both have, the training rates
+    on the ``train_n`` of them with both training logs."""
+    by = ("preset", "multiple_access")
+    test = tables.paired_differences(records, "algorithm", "DT-DPG", "DDPG", by=by, metrics=("success_rate", "mqi"))
+    if test.empty:
+        return test
+    logged = records[records["train_success"].notna()]
+    training = tables.paired_differences(logged, "algorithm", "DT-DPG", "DDPG", by=by, metrics=_TRAINING)
+    key = [*by, "contrast"]
+    if training.empty:
+        training = pd.DataFrame(columns=[*key, "n", *(f"{m}{s}" for m in _TRAINING for s in ("", "_ci"))])
+    paired = test.merge(training.rename(columns={"n": "train_n"}), on=key, how="left")
+    paired["train_n"] = paired["train_n"].fillna(0).astype(int)
+    return paired[[*key, "n", "train_n", *(f"{m}{s}" for m in _METRICS for s in ("", "_ci"))]]
+
+
 def _claim_verdict(side: str, bar: float, mean: float, half_width: float) -> str:
     """
     Whether a training success rate meets one of the paper's claims (Sec. V), judged on the mean over seeds and its
@@ -143,7 +183,7 @@ def _claim_verdict(side: str, bar: float, mean: float, half_width: float) -> str
 
     :param side: ``"<"`` or ``">"``
     :param bar: the claim's rate (0.2, 0.95)
-    :param mean: the mean rate over seeds (NaN: no training logs)
+    :param mean: the mean rate over the seeds with training logs (NaN: none has one)
     :param half_width: its CI half-width (NaN: one seed, judged on the value)
     """
     if not np.isfinite(mean):
@@ -187,11 +227,12 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
     ]
     lines = [f"# {title}", "", "| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     for _, row in summary.iterrows():
+        count = f"{row['n']} {('seed' if row['n'] == 1 else 'seeds') if row['preset'] != '-' else 'episodes'}"
         cells = [
             str(row["preset"]),
             str(row["algorithm"]),
             str(row["multiple_access"]),
-            f"{row['n']} {('seed' if row['n'] == 1 else 'seeds') if row['preset'] != '-' else 'episodes'}",
+            count + (_logged(row["train_n"], row["n"]) if row["preset"] != "-" else ""),
             *(
                 tables.format_ci(row[m], row[f"{m}_ci"], scale=100.0)
                 for m in ("train_success", "train_success_first", "train_success_last")
@@ -205,7 +246,8 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
     lines += [
         "",
         "mean ± 95 % CI half-width (t-interval over seeds); training success: the share of training episodes in which "
-        "every robot reached its destination; of best, of shortest: the test MQI over the best planner's and over "
+        "every robot reached its destination, over the seeds with a training log (n says how many where fewer than "
+        "all); of best, of shortest: the test MQI over the best planner's and over "
         "the shortest-path planner's (with its best power split) on the same missions; planners: CI over the test "
         "missions.",
         "",
@@ -216,7 +258,8 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
         header += ["Test success (points)", "Test MQI"]
         lines += ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
         for _, row in paired.iterrows():
-            cells = [str(row["contrast"]), str(row["preset"]), str(row["multiple_access"]), str(row["n"])]
+            pairs = str(row["n"]) + _logged(row["train_n"], row["n"])
+            cells = [str(row["contrast"]), str(row["preset"]), str(row["multiple_access"]), pairs]
             cells += [
                 tables.format_ci(row[m], row[f"{m}_ci"], scale=100.0)
                 for m in ("train_success", "train_success_first", "train_success_last")
@@ -228,6 +271,12 @@ def _markdown(summary: pd.DataFrame, paired: pd.DataFrame, title: str) -> str:
             lines.append("| " + " | ".join(cells) + " |")
         lines += ["", "paired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences).", ""]
     return "\n".join(lines)
+
+
+def _logged(count: int, n: int) -> str:
+    """The n cell's note where some but not all seeds have a training log: the training rates are over those (none:
+    the rates are "-" and the claim says so)."""
+    return f" ({int(count)} with training logs)" if 0 < count < n else ""
 
 
 def write_tables(
@@ -251,9 +300,7 @@ def write_tables(
     :return: the summary, with the reference planners' rows
     """
     summary = _with_planners(_summary(records), budget)
-    paired = tables.paired_differences(
-        records, "algorithm", "DT-DPG", "DDPG", by=("preset", "multiple_access"), metrics=_METRICS
-    )
+    paired = _paired(records)
     title = (
         f"The paper's task: DDPG vs DT-DPG ({budget.name} budget: {_training(budget, channel)}, "
         f"{budget.scenario or 'mall'}, {budget.eval_episodes} Rayleigh test missions)"
@@ -284,17 +331,45 @@ def _training(budget: Budget, channel: str) -> str:
     return f'{budget.task_long_episodes} training episodes with Rayleigh fading ("reality")'
 
 
+#: The per-run columns that say which budget a run is of: one value in a merged table (a CSV written before a column
+#: existed lacks it)
+BUDGET_COLUMNS = ("scenario", "eval_episodes")
+
+
 def merge_runs(run_tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
     """
     The per-run records of several output folders of the experiment as one table, e.g. the ``paper_task_runs.csv``
     of a job that ran seeds 0-2 and of one that ran seeds 3 and 4.
 
+    Two budgets of the same training episodes give their runs the same ids: the runs' budget columns
+    (:data:`BUDGET_COLUMNS`) and ``configuration`` (their identity less the seed) tell them apart, where the tables
+    record them, and such runs are refused rather than merged as one.
+
     :param run_tables: per-run records (the columns of ``paper_task_runs.csv``)
     :return: one row per run, by preset (:data:`PRESETS` order), algorithm (DT-DPG first), mode (NOMA first), seed
-    :raises ValueError: a run (group and seed) is in more than one table with other results
+    :raises ValueError: the runs are of several budgets (a column of :data:`BUDGET_COLUMNS` has several values), the
+        runs of a group are of several configurations, or a run (group and seed) is in more than one table with
+        other results
     """
+    merged = pd.concat(run_tables, ignore_index=True)
+    for column in BUDGET_COLUMNS:
+        values = sorted(merged[column].dropna().unique().tolist(), key=str) if column in merged else []
+        if len(values) > 1:
+            raise ValueError(
+                f"the runs are of several budgets ({column}: {', '.join(map(repr, values))}): merge the runs of one "
+                "budget, one table per budget"
+            )
+    if "configuration" in merged:
+        for group, digests in merged.groupby("group", sort=False)["configuration"]:
+            found = digests.dropna().unique().tolist()
+            if len(found) > 1:
+                raise ValueError(
+                    f"runs of {group}: several configurations under one id (configuration {', '.join(found)}: their "
+                    "identities differ beyond the seed, e.g. another budget, or a room or preset changed between the "
+                    "jobs); merge the runs of one configuration"
+                )
     key = ["group", "seed"]
-    merged = pd.concat(run_tables, ignore_index=True).drop_duplicates(subset=[*key, "success_rate", "mqi", "train_success"])
+    merged = merged.drop_duplicates(subset=[*key, "success_rate", "mqi", "train_success"])
     clashes = merged[merged.duplicated(subset=key, keep=False)]
     if not clashes.empty:
         group, seed = clashes.iloc[0][key]

@@ -17,7 +17,15 @@ from typing import Any
 from sb3_dtdpg.arguments import MAX_SEED
 from sb3_dtdpg.common.files import json_default, safe_name
 
-__all__ = ["RUN_FORMAT_VERSION", "RunDivergedError", "RunMismatchError", "RunSpec", "check_identity", "run_identity"]
+__all__ = [
+    "RUN_FORMAT_VERSION",
+    "RunDivergedError",
+    "RunMismatchError",
+    "RunSpec",
+    "check_identity",
+    "identity_digest",
+    "run_identity",
+]
 
 #: Version of what a run is and what its result file holds; results of another version are not reused.
 #: 3: the hyperparameters are read back from the built model (:func:`sb3_dtdpg.presets.model_settings`).
@@ -27,7 +35,7 @@ RUN_FORMAT_VERSION = 3
 #: The integer fields of a :class:`RunSpec`: (name, smallest value, None allowed)
 _COUNTS = (
     ("seed", 0, False),
-    ("episodes", 1, False),
+    ("episodes", 1, True),
     ("timesteps", 1, True),
     ("destination_episodes", 1, True),
     ("eval_episodes", 1, False),
@@ -48,7 +56,7 @@ class RunSpec:
     :param algo: one of :data:`sb3_dtdpg.baselines.ALGORITHMS`
     :param multiple_access: ``"noma"`` or ``"oma"``
     :param seed: training seed
-    :param episodes: training budget in episodes
+    :param episodes: training budget in episodes (None: a budget in ``timesteps``; one of the two, not both)
     :param channel: training channel, ``"radio_map"`` (the paper's method) or ``"rayleigh"`` ("reality")
     :param learning_rate: overrides the algorithm's learning rate (None: its default)
     :param destination_episodes: DT-DPG's destination-phase budget (None: 60 % of ``episodes``, or of the episodes
@@ -79,7 +87,7 @@ class RunSpec:
     algo: str
     multiple_access: str
     seed: int
-    episodes: int
+    episodes: int | None
     channel: str = "radio_map"
     learning_rate: float | None = None
     destination_episodes: int | None = None
@@ -104,6 +112,11 @@ class RunSpec:
             if (value is not None or not optional) and not (_is_int(value) and low <= value <= MAX_SEED):
                 what = f"an integer from {low:,} to {MAX_SEED:,}" + (" or None" if optional else "")
                 raise ValueError(f"RunSpec.{name}: expected {what}, got {value!r}")
+        if (self.episodes is None) == (self.timesteps is None):  # the record names the budget the run trains for
+            raise ValueError(
+                f"RunSpec.episodes and RunSpec.timesteps: a run trains for episodes or for timesteps, give one "
+                f"(the other None), got episodes={self.episodes!r} and timesteps={self.timesteps!r}"
+            )
         for name in ("channel", "eval_channel"):
             if getattr(self, name) not in _CHANNELS:
                 raise ValueError(f"RunSpec.{name}: expected one of {_CHANNELS}, got {getattr(self, name)!r}")
@@ -264,16 +277,34 @@ def _compared(identity: dict[str, Any]) -> dict[str, Any]:
     """
     :return: the identity without :data:`_SAME_RESULT_SETTINGS`, and without the name the scenario was given by
         where the identity holds the scenario's content, which decides (None for the env id's default, ``"mall"``,
-        or a file of the same content are one run)
+        or a file of the same content are one run), and without the episodes count of a run of a budget in
+        timesteps (it trains for those; runs stored with the CLI's unused ``--episodes`` default stay this run's)
     """
     spec = identity.get("spec")
     if isinstance(spec, dict) and isinstance(identity.get("scenario"), dict):
         identity = {**identity, "spec": {k: v for k, v in spec.items() if k != "scenario"}}
+    if isinstance(spec, dict) and spec.get("timesteps") is not None:
+        identity = {**identity, "spec": {k: v for k, v in identity["spec"].items() if k != "episodes"}}
     hyperparameters = identity.get("hyperparameters")
     if not isinstance(hyperparameters, dict):
         return identity
     kept = {k: v for k, v in hyperparameters.items() if k not in _SAME_RESULT_SETTINGS}
     return {**identity, "hyperparameters": kept}
+
+
+def identity_digest(identity: dict[str, Any], seed: bool = True) -> str:
+    """
+    :param identity: a run's identity (:func:`run_identity`, or as stored in its result)
+    :param seed: include the seed (False: one digest for the seeds of one configuration)
+    :return: 12 hex digits of it as :func:`check_identity` compares it: another for a run of other settings under the
+        same id (e.g. another budget's, or one in a room recalibrated since)
+    """
+    compared = _compared(identity)
+    for part in () if seed else ("spec", "hyperparameters"):  # the spec's seed, and the model's
+        if isinstance(compared.get(part), dict):
+            compared = {**compared, part: {k: v for k, v in compared[part].items() if k != "seed"}}
+    text = json.dumps(compared, sort_keys=True, default=json_default)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 def check_identity(stored: dict[str, Any], expected: dict[str, Any], what: Path) -> None:
