@@ -203,7 +203,12 @@ def _train_env(args: argparse.Namespace) -> tuple[Any, bool]:
 
 
 #: Constructor arguments that ``train`` sets from its own options, never from ``--hyperparams``.
-_SET_BY_OPTIONS = {"seed": "--seed", "verbose": "--verbose", "tensorboard_log": "--tb"}
+_SET_BY_OPTIONS = {
+    "seed": "--seed",
+    "verbose": "--verbose",
+    "tensorboard_log": "--tb",
+    "curriculum_save_path": "--out (each run saves its phase models in its own folder, <out>/runs/<run id>)",
+}
 
 
 def _cmd_train(args: argparse.Namespace) -> int:

@@ -45,6 +45,8 @@ def assert_one_error_line(code, printed, command, message):
         (["--hyperparams", "policy_kwargs:dict(net_arch=dict(pi=[64]))"], "keys exactly 'pi' and 'qf' (e.g."),
         (["--hyperparams", "policy_kwargs:dict(net_arch=dict(pi=[8], qf=[8], vf=[8]))"], "got the keys ['pi', 'qf', 'vf']"),
         (["--hyperparams", "policy_kwargs:dict(net_arch=(64, 64))"], "expected a list of layer sizes, got (64, 64)"),
+        # was a TypeError traceback after every check, an empty run folder left
+        (["--hyperparams", "curriculum_save_path:'phases'"], "curriculum_save_path (--hyperparams): set it with --out"),
         (["--hyperparams", "batch_size"], "expected key:value"),
         (["--hyperparams", "gamma:__import__('os')"], "is not a Python literal"),
         # were tracebacks after --out was made (the check built the model without its networks and buffer)
