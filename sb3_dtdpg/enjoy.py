@@ -5,7 +5,8 @@ Needs the ``zoo`` extra.
 
 A model is refused on an env built with other settings than it was trained with (scenario, observation, downlink
 mode, e.g. through ``--env-kwargs``), as ``sb3-dtdpg enjoy`` refuses it (:func:`sb3_dtdpg.env_settings.check_settings`):
-one error line, exit status 2.
+one error line, exit status 2; so is an env that cannot be built with the run's env_kwargs (an unknown keyword or
+value, e.g. ``--env-kwargs scenario:"'nosuch'"``).
 """
 
 from __future__ import annotations
@@ -54,6 +55,10 @@ class _SettingsCheckedAlgo:
         return model
 
 
+class _EnvKwargsError(Exception):
+    """The zoo's enjoy could not build the env with its env_kwargs (``main`` prints it as one error line)."""
+
+
 @contextlib.contextmanager
 def _checking_env_settings(zoo_enjoy: ModuleType) -> Iterator[None]:
     """
@@ -66,8 +71,13 @@ def _checking_env_settings(zoo_enjoy: ModuleType) -> Iterator[None]:
     envs: list[Any] = []
     create_test_env, algos = zoo_enjoy.create_test_env, zoo_enjoy.ALGOS
 
-    def create_and_keep(*args: Any, **kwargs: Any) -> Any:
-        envs.append(create_test_env(*args, **kwargs))
+    def create_and_keep(env_id: str, *args: Any, **kwargs: Any) -> Any:
+        try:
+            envs.append(create_test_env(env_id, *args, **kwargs))
+        except (ValueError, TypeError) as error:  # an env_kwargs value or keyword the env does not take
+            env_kwargs = kwargs.get("env_kwargs")
+            where = "--env-kwargs or the run's args.yml"
+            raise _EnvKwargsError(f"env {env_id} with env_kwargs {env_kwargs!r} ({where}): {error}") from None
         return envs[-1]
 
     zoo_enjoy.create_test_env = create_and_keep
@@ -92,7 +102,7 @@ def main() -> None:
     try:
         with _checking_env_settings(rl_zoo3.enjoy):
             rl_zoo3.enjoy.enjoy()
-    except EnvSettingsMismatch as error:
+    except (EnvSettingsMismatch, _EnvKwargsError) as error:
         _user_error(error)
     except (AssertionError, ValueError) as error:
         # The zoo's own checks of the log folder and the model file (asserts among them) are the user's error

@@ -259,18 +259,54 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
         return storage
 
     def _check_config_entry(self) -> None:
-        """A YAML file without an entry for the env id (nor a ``default`` one): one error line that names the file's
-        env ids, before the log folder exists (the zoo's own "Hyperparameters not found" is a traceback)."""
+        """The hyperparameter file's mistakes, each one error line before the log folder exists (the zoo's own errors
+        are tracebacks): a ``--conf-file`` that is not there or not YAML, no entry for the env id (nor a ``default``
+        one: the error names the file's env ids), an entry that is not a mapping of hyperparameters."""
+        import yaml
+
         config = str(self.config)
-        if not config.endswith((".yml", ".yaml")) or not Path(config).is_file() or self._is_atari:
+        if config.endswith((".yml", ".yaml", ".py")) and not Path(config).is_file():
+            raise ZooOptionError(f"--conf-file {config}: no such file")
+        if not config.endswith((".yml", ".yaml")) or self._is_atari:
             return
-        entries = _config_entries(config)
+        try:
+            entries = _config_entries(config)
+        except yaml.YAMLError as error:
+            raise ZooOptionError(f"--conf-file {config} is not valid YAML: {' '.join(str(error).split())}") from None
         env_id = self.env_name.gym_id
         if env_id not in entries and "default" not in entries:
             raise ZooOptionError(
                 f"--env {env_id}: {config} has no entry for it (its env ids: {', '.join(map(str, entries)) or 'none'}); "
                 f"give one of them with --env, or another --conf-file"
             )
+        name = env_id if env_id in entries else "default"
+        if not isinstance(entries[name], dict):
+            raise HyperparameterError(
+                f"the entry {name} in {config} must be a mapping of hyperparameters (key: value lines indented under "
+                f"it), got {entries[name]!r}"
+            )
+
+    def _check_zoo_hyperparams(self, hyperparams: dict[str, Any]) -> None:
+        """The hyperparameters the zoo itself reads, checked before it uses them (its errors are tracebacks, some after
+        the log folder was created): ``n_timesteps`` (unless ``-n``), ``n_envs``, and the class paths of ``policy``,
+        ``env_wrapper``, ``vec_env_wrapper`` and ``callback``, which must import (and take the keyword arguments
+        given with them)."""
+        where = f" (env {self.env_name.gym_id} in {self.config}, or -params)"
+        if self.n_timesteps <= 0:
+            n_timesteps = hyperparams.get("n_timesteps")
+            if n_timesteps is None:
+                raise HyperparameterError(f"n_timesteps is missing{where}: give it in the file's entry or with -n")
+            if isinstance(n_timesteps, bool) or not isinstance(n_timesteps, int | float):
+                raise HyperparameterError(f"n_timesteps must be a number{where}, got {n_timesteps!r}")
+        n_envs = hyperparams.get("n_envs", 1)
+        if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
+            raise HyperparameterError(f"n_envs must be an integer >= 1{where}, got {n_envs!r}")
+        policy = hyperparams.get("policy")
+        if isinstance(policy, str) and "." in policy:  # a class path, not a name such as MlpPolicy
+            _check_class_path(policy, {}, f"policy {policy!r}{where}")
+        for key in ("env_wrapper", "vec_env_wrapper", "callback"):
+            for name, kwargs in _class_paths(hyperparams.get(key), f"{key}{where}"):
+                _check_class_path(name, kwargs, f"{key} {name!r}{where}", positional=int(key != "callback"))
 
     def read_hyperparameters(self) -> tuple[dict[str, Any], dict[str, Any]]:
         self._check_config_entry()
@@ -282,7 +318,7 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
             self.env_kwargs = cli_env_kwargs
         file_env_kwargs = hyperparams.get("env_kwargs") or {}
         if not isinstance(file_env_kwargs, dict):
-            raise ValueError(f"env_kwargs in {self.config} must be a mapping, got {file_env_kwargs!r}")
+            raise HyperparameterError(f"env_kwargs in {self.config} must be a mapping, got {file_env_kwargs!r}")
         env_kwargs = {**file_env_kwargs, **cli_env_kwargs}
         if env_kwargs:
             hyperparams["env_kwargs"] = saved_hyperparams["env_kwargs"] = env_kwargs
@@ -291,6 +327,7 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
         return hyperparams, saved_hyperparams
 
     def _preprocess_hyperparams(self, hyperparams: dict[str, Any]) -> tuple[Any, ...]:
+        self._check_zoo_hyperparams(hyperparams)
         learning_starts = hyperparams.get("learning_starts")
         hyperparams, *others = super()._preprocess_hyperparams(hyperparams)
         if learning_starts is None:
@@ -375,3 +412,50 @@ def _default_learning_starts(algo_class: type) -> int | None:
 
     parameter = inspect.signature(algo_class).parameters.get("learning_starts")
     return None if parameter is None else parameter.default
+
+
+def _class_paths(value: Any, what: str) -> list[tuple[str, dict[str, Any]]]:
+    """
+    :param value: a zoo hyperparameter that names classes (``callback``, ``env_wrapper``, ...): None, a class path, a
+        ``{path: kwargs}`` mapping, or a list of them (a class or callback object in a ``.py`` config is left to the zoo)
+    :param what: the hyperparameter and where it comes from, for the error
+    :return: the class paths with their keyword arguments
+    :raises HyperparameterError: a mapping of other than one class path to its keyword arguments
+    """
+    paths = []
+    for item in [] if value is None else value if isinstance(value, list) else [value]:
+        name, kwargs = next(iter(item.items())) if isinstance(item, dict) and len(item) == 1 else (item, {})
+        if isinstance(item, dict) and not (len(item) == 1 and isinstance(name, str) and isinstance(kwargs, dict)):
+            expected = "a class path or one {module.Class: {keyword: value, ...}}"
+            raise HyperparameterError(f"{what}: expected {expected}, got {item!r}")
+        if isinstance(name, str):
+            paths.append((name, kwargs))
+    return paths
+
+
+def _check_class_path(name: str, kwargs: dict[str, Any], what: str, positional: int = 0) -> None:
+    """
+    :param name: a class path, ``module.Class``
+    :param kwargs: keyword arguments the zoo will give the class
+    :param what: the hyperparameter, for the error
+    :param positional: how many positional arguments the zoo gives the class besides ``kwargs`` (a wrapper's env)
+    :raises HyperparameterError: the class does not import, or does not take those arguments
+    """
+    import importlib
+    import inspect
+
+    module_name, _, class_name = name.rpartition(".")
+    try:
+        if not module_name:
+            raise ImportError("not a module.Class path")
+        found = getattr(importlib.import_module(module_name), class_name)
+    except (ImportError, AttributeError, ValueError) as error:
+        raise HyperparameterError(f"{what} does not import: {error}") from None
+    try:
+        signature = inspect.signature(found)
+    except (TypeError, ValueError):  # no signature to check against
+        return
+    try:
+        signature.bind(*[None] * positional, **kwargs)
+    except TypeError as error:
+        raise HyperparameterError(f"{what}: {error}") from None

@@ -70,3 +70,21 @@ def test_zoo_enjoy_runs_a_model_on_its_own_settings(zoo_logs, monkeypatch, capsy
     zoo_enjoy(monkeypatch, zoo_logs, "dtdpg", *env_kwargs)
     printed = capsys.readouterr()
     assert ": error: " not in printed.err and f"Loading {zoo_logs}" in printed.out
+
+
+@pytest.mark.parametrize(
+    ("env_kwargs", "named"),
+    [
+        (["scenario:'nosuch'"], "'nosuch'"),  # was: a ValueError traceback, exit 1
+        (["observaton:'goal'"], "observaton"),  # was: a TypeError traceback (an unexpected keyword argument)
+    ],
+    ids=["unknown_value", "unknown_keyword"],
+)
+def test_zoo_enjoy_env_kwargs_the_env_cannot_take_are_one_error_line(zoo_logs, monkeypatch, capsys, env_kwargs, named):
+    with pytest.raises(SystemExit) as exit_info:
+        zoo_enjoy(monkeypatch, zoo_logs, "dtdpg", *env_kwargs)
+    printed = capsys.readouterr()
+    assert exit_info.value.code == 2 and "Traceback" not in printed.err
+    errors = [line for line in printed.err.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith(f"python -m sb3_dtdpg.enjoy: error: env {ENV_ID} with env_kwargs {{")
+    assert "(--env-kwargs or the run's args.yml)" in errors[0] and named in errors[0]

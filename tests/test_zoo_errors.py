@@ -34,6 +34,9 @@ def zoo_train(tmp_path, *args):
             "  phases:\n    - {name: dest, n_episodes: 2}\n    - {name: mqi}\n",
             "phases (env Pendulum-v1 in ",  # an env without reward phases
         ),
+        ("  env_kwargs: [1, 2]\n", "bad.yml must be a mapping, got [1, 2]"),  # was: a ValueError traceback
+        ("  n_envs: 0\n", "n_envs must be an integer >= 1 (env Pendulum-v1 in "),  # was: ZeroDivisionError, logs made
+        ("  callback: sb3_dtdpg.MissionLogger\n", "callback 'sb3_dtdpg.MissionLogger' (env Pendulum-v1 in "),
     ],
 )
 def test_a_bad_hyperparameter_file_is_one_error_line(tmp_path, entry, message):
@@ -48,6 +51,40 @@ def test_a_bad_hyperparameter_file_is_one_error_line(tmp_path, entry, message):
     if "learnin_rate" in entry:
         assert "did you mean 'learning_rate'" in errors[0]
     assert not (tmp_path / "logs").exists()  # nothing created
+
+
+@pytest.mark.parametrize(
+    ("config", "args", "message"),
+    [
+        (None, ["--conf-file", "nonexist.yml"], "--conf-file nonexist.yml: no such file"),  # was: FileNotFoundError
+        ("Pendulum-v1:\n", [], "the entry Pendulum-v1 in ok.yml must be a mapping of hyperparameters"),  # was: TypeError
+        ("Pendulum-v1: [\n", [], "--conf-file ok.yml is not valid YAML: "),  # was: a yaml ScannerError traceback
+        ("Pendulum-v1:\n  learning_starts: 100\n", [], "n_timesteps is missing (env Pendulum-v1 in ok.yml"),  # KeyError
+        (None, ["-n", "1000", "-params", "n_envs:-1"], "n_envs must be an integer >= 1 (env Pendulum-v1 in "),
+        (None, ["-n", "1000", "-params", "n_envs:1.5"], "n_envs must be an integer >= 1 "),
+        (
+            None,
+            ["-n", "1000", "-params", "callback:'sb3_dtdpg.MissionLogger'"],  # was: an AttributeError traceback
+            "does not import: module 'sb3_dtdpg' has no attribute 'MissionLogger'",
+        ),
+        (
+            None,
+            ["-n", "1000", "-params", "callback:{'stable_baselines3.common.callbacks.CheckpointCallback':{'sav_freq':9}}"],
+            "callback 'stable_baselines3.common.callbacks.CheckpointCallback' (env Pendulum-v1 in ",
+        ),
+    ],
+    ids=["missing_file", "empty_entry", "not_yaml", "no_n_timesteps", "n_envs_negative", "n_envs_float", "callback", "kwargs"],
+)
+def test_a_bad_config_file_or_zoo_hyperparameter_is_one_error_line(tmp_path, config, args, message):
+    """The zoo's own hyperparameters and its file: the zoo's errors were tracebacks, some after the log folder was made."""
+    if config is not None:
+        (tmp_path / "ok.yml").write_text(config)
+        args = ["--conf-file", "ok.yml", *args]
+    done = zoo_train(tmp_path, *args)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    errors = [line for line in done.stderr.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith("python -m sb3_dtdpg.train: error: ") and message in errors[0]
+    assert not (tmp_path / "logs").exists()
 
 
 def test_bad_env_kwargs_are_one_error_line_before_the_log_folder(tmp_path):
