@@ -63,7 +63,10 @@ _DEFAULTS = {field.name: field.default for field in dataclasses.fields(RunSpec)}
 
 
 def _spec_value(spec: dict[str, Any], field: str) -> Any:
-    """:return: a field of a stored run spec, RunSpec's default where a result of an earlier version lacks it"""
+    """:return: a field of a stored run spec, RunSpec's default where a result of an earlier version lacks it (no
+    episodes count for a run of a budget in timesteps: runs stored with the CLI's unused ``--episodes`` are its)"""
+    if field == "episodes" and spec.get("timesteps") is not None:
+        return None
     value = spec.get(field, _DEFAULTS.get(field))
     if field == "overrides":
         return " ".join(f"{name}:{text}" for name, text in value or [])

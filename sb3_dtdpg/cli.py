@@ -203,12 +203,23 @@ def _train_env(args: argparse.Namespace) -> tuple[Any, bool]:
 
 
 #: Constructor arguments that ``train`` sets from its own options, never from ``--hyperparams``.
-_SET_BY_OPTIONS = {
-    "seed": "--seed",
-    "verbose": "--verbose",
-    "tensorboard_log": "--tb",
+_SET_BY_OPTIONS = {"seed": "--seed", "verbose": "--verbose", "tensorboard_log": "--tb"}
+#: Set by a mission run of ``train`` too (the other envs train outside the run folders and take them as given).
+_SET_BY_MISSION_RUNS = {
     "curriculum_save_path": "--out (each run saves its phase models in its own folder, <out>/runs/<run id>)",
 }
+
+
+def _is_mission_id(env_id: str) -> bool:
+    """Whether ``env_id`` is a mission env; False for an id that is not registered (refused with its own message)."""
+    import gymnasium as gym
+
+    from sb3_dtdpg.baselines import is_mission_env
+
+    try:
+        return is_mission_env(env_id)
+    except gym.error.Error:
+        return False
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -221,7 +232,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     args.tb = args.tb or str(Path(args.out) / "tb")  # a run's logs live with its results, under its lock
     with _user_errors(args):
         check_hyperparams(args.algo, args.hyperparams)
-        check_constructor_kwargs(algorithm_class(args.algo), args.overrides, " (--hyperparams)", reserved=_SET_BY_OPTIONS)
+        reserved = {**_SET_BY_OPTIONS, **(_SET_BY_MISSION_RUNS if _is_mission_id(args.env) else {})}
+        check_constructor_kwargs(algorithm_class(args.algo), args.overrides, " (--hyperparams)", reserved=reserved)
     if "learning_rate" in args.overrides:
         if args.learning_rate is not None:
             args.error("--learning-rate and --hyperparams learning_rate:...: give the learning rate once")

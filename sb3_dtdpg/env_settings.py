@@ -305,7 +305,14 @@ def check_settings(recorded: dict[str, Any] | None, env: Any, what: str = "the m
                 f"sb3-dtdpg: {scenario_option}--observation {recorded.get('observation')} "
                 f"--multiple-access {recorded.get('multiple_access')}"
             )
+        older = ""
+        if recorded.get("observation") == "goal" and split_observation(actual.get("observation"))[1]:
+            older = (
+                "; a model saved before 2026-12-06 behind RelativeGoalObservation records 'goal' whatever the layout "
+                "under the wrapper: if this one was trained on this wrapped env, load it with "
+                "custom_objects={'env_settings': None}"
+            )
         raise EnvSettingsMismatch(
             f"{what} was trained with {', '.join(differences)}; build the env with those settings, e.g. "
-            f"{_make_call(recorded)} ({cli})"
+            f"{_make_call(recorded)} ({cli}){older}"
         )

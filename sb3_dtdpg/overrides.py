@@ -171,9 +171,11 @@ def _check_net_arch(net_arch: Any, where: str) -> None:
             f"net_arch{where}: a dict gives the actor's and the critics' layers, keys exactly 'pi' and 'qf' (e.g. "
             f"dict(pi=[64, 64], qf=[400, 300])), got the keys {list(net_arch)}"
         )
+    if not isinstance(net_arch, dict | list):  # SB3 asserts one or the other (a tuple fails); a dict's values are free
+        raise HyperparameterError(f"net_arch{where}: expected a list of layer sizes or a dict of them, got {net_arch!r}")
     stacks = net_arch.values() if isinstance(net_arch, dict) else [net_arch]
     for stack in stacks:
-        if not isinstance(stack, list):  # SB3 takes lists only (a tuple fails its assertion)
+        if not isinstance(stack, Sequence) or isinstance(stack, str):
             raise HyperparameterError(f"net_arch{where}: expected a list of layer sizes, got {net_arch!r}")
         for size in stack:
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:

@@ -16,6 +16,7 @@ that says so.
 import collections
 import dataclasses
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -345,6 +346,13 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
         self.eval_env_kwargs = {**self.env_kwargs, **(self._eval_env_kwargs_args or {})}
         if self.algo == ALGO_NAME and not self.optimize_hyperparameters:
             hyperparams.setdefault("curriculum_save_path", self.save_path)
+        elif self.algo == ALGO_NAME and hyperparams.pop("curriculum_save_path", None) is not None:
+            # every trial would save its phase models there: the second would be refused (another run's files)
+            warnings.warn(
+                "curriculum_save_path is left out of a hyperparameter search: its trials save no phase models",
+                UserWarning,
+                stacklevel=2,
+            )
         return (hyperparams, *others)
 
     def hyperparameters_optimization(self) -> None:

@@ -53,6 +53,19 @@ def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
     assert list(summary["algo"]) == ["dtdpg", "ddpg"] and list(summary["train_success"].str[:4]) == ["75.0", "50.0"]
 
 
+def test_paper_task_runs_counts_timestep_runs_stored_with_the_unused_episodes_as_one_configuration(tmp_path):
+    paper_task_runs = load_script("paper_task_runs")
+    for seed, episodes in ((0, 500), (1, None)):  # stored before and after train --timesteps recorded no episodes
+        run_id = f"ddpg_noma_s{seed}"
+        (tmp_path / "runs" / run_id).mkdir(parents=True)
+        spec = {"algo": "ddpg", "multiple_access": "noma", "seed": seed, "episodes": episodes, "timesteps": 300}
+        result = {"spec": spec, "eval": {"summary": {"success_rate": 1.0, "mqi": 800.0}}, "train": {"wall_s": 2.0}}
+        (tmp_path / "runs" / run_id / "result.json").write_text(json.dumps(result))
+    rows = paper_task_runs.run_rows(tmp_path)
+    assert rows["budget_episodes"].isna().all() and list(rows["timesteps"]) == [300, 300]
+    assert list(paper_task_runs.summary_rows(rows)["n"]) == [2]
+
+
 def test_learner_gap_measures_only_the_run_folders_of_its_pattern(tmp_path):
     # reproduce keeps several experiments' runs in one folder; --runs picks one experiment's (the table pools by
     # algorithm and mode): a folder matching no pattern is never loaded (this one's model is not a zip)

@@ -246,3 +246,25 @@ def test_the_text_of_a_value_without_classes_is_its_repr(value):
     from sb3_dtdpg.overrides import override_text
 
     assert override_text(value) == repr(value)
+
+
+@pytest.mark.parametrize("algo", ["dtdpg", "ddpg", "td3", "sac", "tqc"])
+def test_a_net_arch_dict_of_tuples_is_taken_as_sb3_takes_it(algo):
+    from sb3_dtdpg.baselines import algorithm_class, make_model
+    from sb3_dtdpg.overrides import HyperparameterError, check_constructor_kwargs
+
+    policy_kwargs = {"net_arch": {"pi": (8, 8), "qf": (16,)}}
+    check_constructor_kwargs(algorithm_class(algo), {"policy_kwargs": policy_kwargs}, "")
+    model = make_model(algo, gym.make("Pendulum-v1"), policy_kwargs=policy_kwargs, learning_starts=10)
+    assert model.policy.actor is not None  # built: SB3's create_mlp takes tuples inside a dict
+    with pytest.raises(HyperparameterError, match=r"a list of layer sizes or a dict of them, got \(8, 8\)"):
+        check_constructor_kwargs(algorithm_class(algo), {"policy_kwargs": {"net_arch": (8, 8)}}, "")  # SB3 asserts
+
+
+def test_curriculum_save_path_is_a_hyperparameter_of_train_on_other_envs_only(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, printed = run_cli(["train", "--algo", "dtdpg", "--hyperparams", "curriculum_save_path:'P'"], capsys)
+    assert code == 2 and "curriculum_save_path (--hyperparams): set it with --out" in printed.err  # a mission run's
+    argv = ["train", "--algo", "dtdpg", "--env", "Pendulum-v1", "--timesteps", "200", "--out", "O", "--no-progress"]
+    assert main([*argv, "--eval-episodes", "1", "--hyperparams", "curriculum_save_path:'P'", "learning_starts:100"]) == 0
+    assert sorted(p.name for p in (tmp_path / "P").iterdir()) == ["phase_0_train.zip"]  # the phase saved where asked

@@ -103,6 +103,12 @@ def test_a_relative_goal_wrapper_is_recorded_as_the_features_it_makes(tmp_path, 
         DTDPG.load(tmp_path / "scaled.zip", env=small_env(observation="goal"))  # was loaded: "goal" recorded
     assert "RelativeGoalObservation(distance_scale=4.0, env=gym.make(" in str(error.value)
     assert "observation='destinations'" in str(error.value)
+    # a model saved before: "goal" recorded for any wrapped layout; refused on the wrapped env, with the way out
+    old = DTDPG.load(tmp_path / "scaled.zip", custom_objects={"env_settings": {**settings_of(scaled), "observation": "goal"}})
+    old.save(tmp_path / "old.zip")
+    with pytest.raises(EnvSettingsMismatch, match=re.escape("custom_objects={'env_settings': None}")):
+        DTDPG.load(tmp_path / "old.zip", env=scaled)
+    DTDPG.load(tmp_path / "old.zip", env=scaled, custom_objects={"env_settings": None})
     code, output = run_cli(["evaluate", str(tmp_path / "scaled.zip"), "--n-episodes", "1"], capsys)
     assert code == 2 and "trained on observations of a wrapper" in output.err and recorded in output.err
 

@@ -118,3 +118,33 @@ def test_single_robot_outage_maps(scenario):
 def test_antenna_distance():
     receivers = np.array([[3.0, 4.0, 1.5], [0.0, 0.0, 1.5]])
     np.testing.assert_allclose(antenna_distance(np.array([0.0, 0.0, 3.5]), receivers), [np.sqrt(29.0), 2.0])
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (
+            lambda: mission_quality_indicator(100, 5, 2, 2.0),
+            r"mission_time, outage_steps: expected arrays of shape \(\.\.\., U\), got shape \(\)",
+        ),
+        (
+            lambda: mission_quality_indicator(np.array([100, 90]), [5], [2], 1.0),
+            r"t_total: expected a number, got an array of shape \(2,\)",
+        ),
+        (lambda: decoding_order(np.float64(2.0)), r"equivalent_gains: expected arrays of shape \(\.\.\., U\), got shape \(\)"),
+        (
+            lambda: clip_displacements([1.0, 0.0, 0.0, 0.0], 0.5),
+            r"actions: expected arrays of shape \(\.\.\., 2\), got shape \(4,\)",
+        ),
+        (lambda: clip_displacements([1.0, 0.0], np.array([0.5, 0.5])), r"max_step: expected a number, got an array"),
+    ],
+)
+def test_the_row_functions_name_inputs_of_another_shape(call, message):
+    with pytest.raises(ValueError, match=message):  # were IndexErrors, or a (4,) vector read as two robots
+        call()
+
+
+def test_the_row_functions_take_empty_batches_and_one_robot():
+    assert mission_quality_indicator(100.0, np.zeros((0, 2)), np.zeros((0, 2)), 1.0).shape == (0,)
+    assert mission_quality_indicator(100.0, [7], [3], 2.0) == 87.0
+    assert decoding_order([[2.0]]).tolist() == [[0]] and clip_displacements(np.zeros((0, 2)), 0.5).shape == (0, 2)

@@ -384,10 +384,14 @@ def test_zoo_runs_log_the_mission_scalars(tmp_path: Path) -> None:
 # ----------------------------------------------------------------------------- shared studies
 @pytest.fixture(scope="module")
 def journal_study(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str, list[str]]:
-    """Two --optimize workers started at the same time on one JournalFile storage, 2 trials each."""
+    """Two --optimize workers started at the same time on one JournalFile storage, 2 trials each (a
+    ``curriculum_save_path`` given too: trials save no phase models, which the next trial would refuse)."""
     cwd = tmp_path_factory.mktemp("journal")
     storage = str(cwd / "study.log")
-    workers = [start_zoo("train", *optimize_args(storage, "shared", n_trials=2, seed=seed), cwd=cwd) for seed in (1, 2)]
+    phases = f"curriculum_save_path:'{cwd / 'phases'}'"
+    workers = [
+        start_zoo("train", *optimize_args(storage, "shared", n_trials=2, seed=seed), phases, cwd=cwd) for seed in (1, 2)
+    ]
     return cwd, storage, wait_all(workers)
 
 
@@ -397,7 +401,7 @@ def load_journal_study(storage: str, name: str) -> "optuna.Study":
 
 
 def test_two_workers_share_one_journal_study(journal_study: tuple[Path, str, list[str]]) -> None:
-    _, storage, outputs = journal_study
+    cwd, storage, outputs = journal_study
     study = load_journal_study(storage, "shared")
     assert sorted(trial.number for trial in study.trials) == [0, 1, 2, 3]
     assert all(trial.state == optuna.trial.TrialState.COMPLETE for trial in study.trials)
@@ -407,6 +411,8 @@ def test_two_workers_share_one_journal_study(journal_study: tuple[Path, str, lis
         int(line.split()[-1]) for out in outputs for line in out.splitlines() if "Number of finished trials" in line
     )
     assert finished[-1] == 4 and finished[0] >= 2
+    assert all("its trials save no phase models" in out for out in outputs)
+    assert not (cwd / "phases").exists()
 
 
 def test_trial_id_trains_the_stored_trial(journal_study: tuple[Path, str, list[str]]) -> None:

@@ -1,10 +1,12 @@
-"""The env's compiled loops: numba's ``njit``, with the machine code cached on disk where it can be written."""
+"""The env's compiled loops: numba's ``njit``, with the machine code cached on disk where it can be written, and the
+arrangement of arrays into the rows the loops take."""
 
 import warnings
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numba
+import numpy as np
 
 Function = TypeVar("Function", bound=Callable)
 
@@ -36,3 +38,28 @@ def compiled(function: Function) -> Function:
                 stacklevel=2,
             )
         return numba.njit(function)
+
+
+def as_rows(what: str, *arrays: Any, last: int | None = None) -> tuple[list[np.ndarray], tuple[int, ...]]:
+    """
+    Arrays with robots (or coordinates) on their last axis, as the (M, K) float64 rows a compiled kernel takes.
+
+    :param what: the arrays, for the error (e.g. ``"mission_quality_indicator: mission_time, outage_steps"``)
+    :param arrays: arrays broadcastable to one shape (..., K)
+    :param last: the length K must have (None: any)
+    :return: each array broadcast and reshaped to (M, K), and the leading shape (...) to reshape a result to
+    :raises ValueError: a 0-d shape, or a last axis other than ``last``, naming the shape
+    """
+    values = [np.asarray(array, dtype=np.float64) for array in arrays]
+    shape = np.broadcast_shapes(*(value.shape for value in values))
+    if not shape or (last is not None and shape[-1] != last):
+        raise ValueError(f"{what}: expected arrays of shape (..., {last or 'U'}), got shape {shape}")
+    rows = (int(np.prod(shape[:-1], dtype=np.int64)), shape[-1])
+    return [np.broadcast_to(value, shape).reshape(rows) for value in values], shape[:-1]
+
+
+def as_scalar(name: str, value: Any) -> float:
+    """:return: ``value`` as a float; :raises ValueError: for an array of more than one value, naming it"""
+    if np.ndim(value) != 0:
+        raise ValueError(f"{name}: expected a number, got an array of shape {np.shape(value)}")
+    return float(value)

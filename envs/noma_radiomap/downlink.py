@@ -16,7 +16,7 @@ from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
-from noma_radiomap.compiled import compiled
+from noma_radiomap.compiled import as_rows, compiled
 from noma_radiomap.propagation import linear_to_db
 
 MultipleAccess = Literal["noma", "oma"]
@@ -93,10 +93,10 @@ def decoding_order(equivalent_gains: np.ndarray) -> np.ndarray:
 
     :param equivalent_gains: ``G_u``, shape (..., U)
     :return: integer indices, shape (..., U)
+    :raises ValueError: a 0-d ``equivalent_gains``
     """
-    gains = np.asarray(equivalent_gains, dtype=np.float64)
-    rows = (int(np.prod(gains.shape[:-1], dtype=np.int64)), gains.shape[-1])
-    return decoding_order_rows(gains.reshape(rows)).reshape(gains.shape)
+    (gains,), shape = as_rows("decoding_order: equivalent_gains", equivalent_gains)
+    return decoding_order_rows(gains).reshape((*shape, gains.shape[1]))
 
 
 @compiled

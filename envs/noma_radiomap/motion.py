@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from noma_radiomap import geometry
-from noma_radiomap.compiled import compiled
+from noma_radiomap.compiled import as_rows, as_scalar, compiled
 from noma_radiomap.scenario import Room
 
 
@@ -25,9 +25,10 @@ def clip_displacements(actions: np.ndarray, max_step: float) -> np.ndarray:
     :param actions: motion actions, shape (..., 2); clipped to [-1, 1]
     :param max_step: the longest displacement of one step, in metres
     :return: displacements in metres, float64 of shape (..., 2)
+    :raises ValueError: ``actions`` not of shape (..., 2), a ``max_step`` array
     """
-    actions = np.asarray(actions, dtype=np.float64)
-    return displacement_rows(actions.reshape(-1, 2), float(max_step)).reshape(actions.shape)
+    (rows,), shape = as_rows("clip_displacements: actions", actions, last=2)
+    return displacement_rows(rows, as_scalar("max_step", max_step)).reshape((*shape, 2))
 
 
 @compiled

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from noma_radiomap.compiled import compiled
+from noma_radiomap.compiled import as_rows, as_scalar, compiled
 
 #: The reward phases: the paper's destination training (Eq. (26)), its MQI training (Eq. (27)) and all five
 #: components at once (the plain DDPG baseline).
@@ -191,12 +191,11 @@ def mission_quality_indicator(
     :param outage_steps: steps each robot spent in outage, (..., U)
     :param outage_penalty: ``lambda``
     :return: the MQI, float64 of shape (...)
+    :raises ValueError: 0-d ``mission_time`` and ``outage_steps``, or ``t_total`` / ``outage_penalty`` arrays
     """
-    arrays = [np.asarray(value, dtype=np.float64) for value in (mission_time, outage_steps)]
-    shape = np.broadcast_shapes(*(array.shape for array in arrays))
-    rows = (int(np.prod(shape[:-1], dtype=np.int64)), shape[-1])
-    mission_time, outage_steps = (np.broadcast_to(array, shape).reshape(rows) for array in arrays)
-    return mqi_rows(float(t_total), mission_time, outage_steps, float(outage_penalty)).reshape(shape[:-1])
+    (times, outages), shape = as_rows("mission_quality_indicator: mission_time, outage_steps", mission_time, outage_steps)
+    t_total, outage_penalty = as_scalar("t_total", t_total), as_scalar("outage_penalty", outage_penalty)
+    return mqi_rows(t_total, times, outages, outage_penalty).reshape(shape)
 
 
 @compiled
