@@ -6,6 +6,7 @@ import re
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 
 from sb3_dtdpg import DTDPG
 from sb3_dtdpg.baselines import make_env, make_model
@@ -85,6 +86,40 @@ def test_learn_needs_a_positive_integer_budget(total_timesteps):
     with pytest.raises(ValueError, match=re.escape(f"total_timesteps must be a positive integer, got {total_timesteps!r}")):
         model.learn(total_timesteps)
     assert model.num_timesteps == 0
+
+
+def test_learn_takes_a_float_budget_of_whole_steps_as_sb3_does():
+    model = DTDPG("MlpPolicy", "Pendulum-v1", **TINY).learn(1e2)  # e.g. learn(1e5): was refused
+    assert model.num_timesteps == 100 and model._total_timesteps == 100
+
+
+def test_load_uses_the_replay_buffer_class_it_is_given(tmp_path):
+    from stable_baselines3.common.buffers import ReplayBuffer
+
+    class MyBuffer(ReplayBuffer):
+        pass
+
+    DTDPG("MlpPolicy", "Pendulum-v1", **TINY).save(tmp_path / "model.zip")
+    model = DTDPG.load(tmp_path / "model.zip", env=gym.make("Pendulum-v1"), replay_buffer_class=MyBuffer)
+    assert model.replay_buffer_class is MyBuffer and type(model.replay_buffer) is MyBuffer  # was SB3's, silently
+    assert type(DTDPG.load(tmp_path / "model.zip", env=gym.make("Pendulum-v1")).replay_buffer) is not MyBuffer
+
+
+def test_load_with_a_learning_rate_of_0_freezes_the_model_as_sb3_does(tmp_path):
+    DTDPG("MlpPolicy", "Pendulum-v1", **TINY).save(tmp_path / "model.zip")
+    model = DTDPG.load(tmp_path / "model.zip", env=gym.make("Pendulum-v1"), learning_rate=0.0)  # was refused
+    before = [p.detach().clone() for p in model.actor.parameters()]
+    model.learn(30)
+    assert model.actor.optimizer.param_groups[0]["lr"] == 0.0
+    assert all(th.equal(a, b.detach()) for a, b in zip(before, model.actor.parameters(), strict=True))
+
+
+def test_learn_without_an_env_is_sb3s_error(tmp_path):
+    from stable_baselines3.common.env_util import make_vec_env
+
+    DTDPG("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=2), **TINY).learn(20).save(tmp_path / "model.zip")
+    with pytest.raises(AssertionError, match="You must set the environment before calling _setup_learn"):
+        DTDPG.load(tmp_path / "model.zip").learn(10)  # was an AttributeError on None.num_envs
 
 
 @pytest.mark.parametrize("setting", ["curriculum_save_path", "tensorboard_log"])

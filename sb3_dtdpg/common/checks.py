@@ -105,13 +105,17 @@ def check_off_policy_settings(owner: str, settings: Mapping[str, Any]) -> None:
         raise ValueError(f"{owner}: n_steps must be at most buffer_size ({buffer_size}), got {n_steps!r}")
 
 
-def check_total_timesteps(total_timesteps: Any) -> None:
+def check_total_timesteps(total_timesteps: Any) -> int:
     """
-    :param total_timesteps: the budget of ``learn()``
+    :param total_timesteps: the budget of ``learn()``: a positive integer, or a float of one (``1e5``, as SB3 takes)
+    :return: it as an ``int``
     :raises ValueError: unless it is a positive integer
     """
+    if isinstance(total_timesteps, float | np.floating) and np.isfinite(total_timesteps) and total_timesteps.is_integer():
+        total_timesteps = int(total_timesteps)
     if not _is_int(total_timesteps) or total_timesteps < 1:
         raise ValueError(f"learn(): total_timesteps must be a positive integer, got {total_timesteps!r}")
+    return int(total_timesteps)
 
 
 def check_switches(owner: str, switches: Mapping[str, Any]) -> None:

@@ -301,7 +301,7 @@ class DTDPG(LeanStep, DDPG):
         before the given callbacks. Mission figures are logged by passing
         :class:`sb3_dtdpg.MissionLoggerCallback` as a callback.
 
-        :param total_timesteps: the number of env steps to train for (a positive integer)
+        :param total_timesteps: the number of env steps to train for (a positive integer, or a float of one: ``1e5``)
         :param callback: callback(s) called at every step
         :param log_interval: episodes between log dumps
         :param tb_log_name: the name of the run for TensorBoard logging
@@ -309,7 +309,7 @@ class DTDPG(LeanStep, DDPG):
         :param progress_bar: display a progress bar using tqdm and rich
         :return: the trained model
         """
-        check_total_timesteps(total_timesteps)
+        total_timesteps = check_total_timesteps(total_timesteps)
         check_log_interval(log_interval)
         check_callback(callback)
         user_callbacks: list[BaseCallback] = []
@@ -351,7 +351,7 @@ class DTDPG(LeanStep, DDPG):
         # SB3 wraps the noise in one copy per env, once: a model loaded onto another number of envs gets copies for
         # these (the decay schedule, shared by the copies, goes on)
         noise = self.action_noise
-        if isinstance(noise, VectorizedActionNoise) and len(noise.noises) != self.env.num_envs:
+        if isinstance(noise, VectorizedActionNoise) and self.env is not None and len(noise.noises) != self.env.num_envs:
             base = noise.noises[0]
             base.reset()
             self.action_noise = VectorizedActionNoise(base, self.env.num_envs) if self.env.num_envs > 1 else base
@@ -397,6 +397,8 @@ class DTDPG(LeanStep, DDPG):
     def load(cls, path: Any, env: GymEnv | None = None, device: Any = "auto", custom_objects: Any = None, **kwargs: Any):
         # settings given as keyword arguments replace the saved ones: the constructor's checks hold for them too
         # (custom_objects are not checked: they stand in for objects that cannot be unpickled, e.g. learning_rate=0)
+        if kwargs.get("learning_rate") == 0 and not isinstance(kwargs["learning_rate"], bool):  # a frozen model, as SB3
+            custom_objects = {**(custom_objects or {}), "learning_rate": kwargs.pop("learning_rate")}
         check_off_policy_settings("DTDPG.load", kwargs)
         check_switches("DTDPG.load", {name: kwargs[name] for name in _SWITCHES if name in kwargs})
         for folder in ("curriculum_save_path", "tensorboard_log"):
@@ -409,7 +411,10 @@ class DTDPG(LeanStep, DDPG):
             env_settings.check_settings(data.get("env_settings"), env, f"the model {path}")
         if kwargs.get("action_noise") is not None and data.get("action_space") is not None:
             check_action_noise("DTDPG.load", kwargs["action_noise"], data["action_space"].shape)
-        # a model saved before its buffer choice was recorded keeps its buffer (the constructor's flag would stand)
+        # a model saved before its buffer choice was recorded keeps its buffer (the constructor's flag would stand);
+        # a buffer class given here is used (None: the model picks one for its returns, as when it was built)
+        if "replay_buffer_class" in kwargs:
+            kwargs["_buffer_follows_returns"] = kwargs["replay_buffer_class"] is None
         kwargs.setdefault("_buffer_follows_returns", data.get("_buffer_follows_returns", False))
         if kwargs["_buffer_follows_returns"] and "replay_buffer_kwargs" in kwargs:
             returns = {name: kwargs.get(name, data.get(name)) for name in ("n_steps", "gamma")}
