@@ -304,7 +304,7 @@ class ExperimentManager(rl_zoo3.exp_manager.ExperimentManager):
             raise HyperparameterError(f"n_envs must be an integer >= 1{where}, got {n_envs!r}")
         policy = hyperparams.get("policy")
         if isinstance(policy, str) and "." in policy:  # a class path, not a name such as MlpPolicy
-            _check_class_path(policy, {}, f"policy {policy!r}{where}")
+            _check_class_path(policy, {}, f"policy {policy!r}{where}", positional=3)  # spaces and lr schedule
         for key in ("env_wrapper", "vec_env_wrapper", "callback"):
             for name, kwargs in _class_paths(hyperparams.get(key), f"{key}{where}"):
                 _check_class_path(name, kwargs, f"{key} {name!r}{where}", positional=int(key != "callback"))

@@ -198,3 +198,16 @@ def test_a_trials_own_value_error_is_not_taken_for_a_study_without_a_completed_t
     manager.algo, manager.storage, manager.study_name, manager.max_total_trials = "ddpg", "s.log", "shared", 1
     with pytest.raises(ValueError, match="the objective's own error"):
         manager.hyperparameters_optimization()
+
+
+def test_a_policy_class_path_that_imports_passes_the_zoo_check():
+    from types import SimpleNamespace
+
+    from sb3_dtdpg.overrides import HyperparameterError
+    from sb3_dtdpg.zoo import ExperimentManager
+
+    manager = ExperimentManager.__new__(ExperimentManager)  # only what the check reads
+    manager.n_timesteps, manager.config, manager.env_name = 100, "x.yml", SimpleNamespace(gym_id="Pendulum-v1")
+    manager._check_zoo_hyperparams({"policy": "sb3_dtdpg.dtdpg.policies.DTDPGPolicy"})  # was "missing ... argument"
+    with pytest.raises(HyperparameterError, match=r"policy 'sb3_dtdpg\.dtdpg\.policies\.NoSuch' .* does not import"):
+        manager._check_zoo_hyperparams({"policy": "sb3_dtdpg.dtdpg.policies.NoSuch"})
