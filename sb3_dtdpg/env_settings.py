@@ -13,6 +13,11 @@ apart by their digests (a model saved before the digest was recorded is checked 
 
 The training channel is recorded but not checked: a model trained on the radio map is tested with Rayleigh
 fading (the paper's protocol). Envs that are not mission envs have no settings and are never refused here.
+
+The envs of a ``VecEnv`` that keeps them in other processes (SB3's ``SubprocVecEnv``) are read where they live:
+:func:`settings_of` runs there on the first env, wrappers and all (:class:`_ReadSettings`), and gives what it gives
+for the same env in a ``DummyVecEnv``. Where that cannot be done (a closed ``VecEnv``, an env without a Gymnasium
+wrapper) it warns, once per ``VecEnv`` class and reason.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import functools
 import hashlib
 import json
 import os
+import warnings
 from collections.abc import Iterator, Mapping
 from typing import Any
 
@@ -75,6 +81,85 @@ def _single_env(env: Any) -> Any:
     if hasattr(env, "envs") and env.envs:  # DummyVecEnv
         return env.envs[0]
     return env
+
+
+#: The attribute of a remote env's outermost layer that :class:`_ReadSettings` leaves its reading in.
+_READING = "_sb3_dtdpg_env_settings"
+#: The (VecEnv class, reason) pairs :func:`_remote_settings` has warned of.
+_WARNED: set[tuple[str, str]] = set()
+
+
+def _remote_vec_env(env: Any) -> Any:
+    """The SB3 ``VecEnv`` behind ``env`` (and its ``VecEnvWrapper``) whose envs live elsewhere, else None."""
+    while hasattr(env, "venv"):
+        env = env.venv
+    if getattr(env, "envs", None) or hasattr(env, "vec_env"):  # DummyVecEnv, MissionVecEnv: read here
+        return None
+    remote = all(callable(getattr(env, name, None)) for name in ("env_is_wrapped", "get_attr", "set_attr"))
+    return env if remote else None
+
+
+class _ReadSettings(type):
+    """
+    The metaclass of :class:`_SettingsProbe`, which :func:`_remote_settings` hands to a ``VecEnv``'s
+    ``env_is_wrapped``: where the env lives, the ``VecEnv`` asks whether each of its wrapper layers, outermost first,
+    is an instance of it (SB3's ``is_wrapped``). SB3 calls no function of ours on the env itself (``env_method`` only
+    calls the env's own methods, ``get_attr`` would pickle a whole env for a bound method such as an
+    ``ObservationWrapper``'s ``observation``), so the first question runs :func:`settings_of` on the outermost
+    layer, leaves the result in its :data:`_READING` attribute for ``get_attr`` and ends the search.
+    """
+
+    def __instancecheck__(cls, layer: Any) -> bool:
+        try:
+            reading: tuple[str, Any] = ("read", settings_of(layer))
+        except Exception as error:  # an exception here would end SB3's worker process
+            reading = ("failed", f"{type(error).__name__}: {error}")
+        try:
+            setattr(layer, _READING, reading)
+        except Exception:
+            return False
+        return True
+
+
+class _SettingsProbe(metaclass=_ReadSettings):
+    """What a remote env is asked whether it is wrapped with, to read its settings (:class:`_ReadSettings`)."""
+
+
+def _remote_settings(venv: Any) -> dict[str, Any] | None:
+    """The settings of the first env of a ``VecEnv`` whose envs live in other processes (:class:`_ReadSettings`)."""
+    if getattr(venv, "closed", False):
+        reason = "it is closed"
+    elif getattr(venv, "waiting", False):
+        reason = "it is waiting for a step"
+    else:
+        try:
+            venv.set_attr(_READING, None, indices=[0])  # get_attr below finds it even where nothing reads
+            venv.env_is_wrapped(_SettingsProbe, indices=[0])
+            reading = venv.get_attr(_READING, indices=[0])[0]
+        except Exception as error:  # a VecEnv of other ways: warned of below
+            reading = ("failed", f"{type(error).__name__}: {error}")
+        if isinstance(reading, tuple) and reading[0] == "read":
+            return reading[1]
+        reason = reading[1] if isinstance(reading, tuple) else "its first env has no Gymnasium wrapper to ask"
+        if reading is None and not _is_mission_env(venv):
+            return None  # a bare env of another kind: no settings to miss
+    key = (type(venv).__name__, reason)
+    if key not in _WARNED:
+        _WARNED.add(key)
+        warnings.warn(
+            f"the mission-env settings of the first env of this {key[0]} cannot be read ({reason}): they are neither "
+            "recorded in a model saved with it nor checked against the settings a model was trained with",
+            stacklevel=3,
+        )
+    return None
+
+
+def _is_mission_env(venv: Any) -> bool:
+    """Whether the remote first env has a mission env's attributes (True where that cannot be told)."""
+    try:
+        return bool(venv.has_attr("scenario") and venv.has_attr("multiple_access"))
+    except Exception:
+        return True
 
 
 def _layers(env: Any) -> Iterator[Any]:
@@ -165,14 +250,18 @@ def describe_scenario(settings: Mapping[str, Any]) -> str:
 
 def settings_of(env: Any) -> dict[str, Any] | None:
     """
-    :param env: a Gymnasium env, an SB3 ``VecEnv`` or :class:`sb3_dtdpg.vec_env.MissionVecEnv` (or None)
+    :param env: a Gymnasium env, an SB3 ``VecEnv`` (of its first env, read in its process for a ``SubprocVecEnv``)
+        or :class:`sb3_dtdpg.vec_env.MissionVecEnv` (or None)
     :return: the env's :data:`SETTINGS` (``scenario`` is the scenario's name), or None for an env that is not a
-        NomaRadioMap mission env
+        NomaRadioMap mission env, or one of a remote ``VecEnv`` that cannot be read (with a warning)
     """
     from noma_radiomap import Scenario
 
     if env is None:
         return None
+    remote = _remote_vec_env(env)
+    if remote is not None:
+        return _remote_settings(remote)
     single = _single_env(env)
     base = getattr(single, "vec_env", None) or getattr(single, "unwrapped", single)
     # the batched NomaRadioMapVecEnv keeps its settings in its mission core
