@@ -497,3 +497,19 @@ def test_the_transfer_dip_windows_meet_at_the_transfer(monkeypatch):
     monkeypatch.setattr(plots, "episode_curves", lambda log_dir, tags: {"mission/mqi": curve})
     dip = reproduce._dip(None, window=3)
     assert (dip["before"], dip["after"], dip["final"]) == (4.0, 7.0, 19.0)  # episodes 3-5, 6-8, 18-20
+
+
+def test_a_model_loaded_without_its_noise_resumes_at_the_phases_scale_of_the_moment(tmp_path):
+    import gymnasium as gym
+
+    def env():
+        return gym.make("Pendulum-v1", max_episode_steps=20)
+
+    phase = Phase("train", reward_phase=None, sigma=0.5, final_sigma=0.1, decay_episodes=10)
+    model = DTDPG("MlpPolicy", env(), phases=[phase], learning_starts=10, batch_size=16, seed=0)
+    model.learn(400)  # 20 episodes: the decay is over
+    assert noise_sigma(model.action_noise) == pytest.approx(0.1)
+    model.save(tmp_path / "model.zip")
+    resumed = DTDPG.load(tmp_path / "model.zip", env=env(), action_noise=None)
+    resumed.learn(20, reset_num_timesteps=False)
+    assert noise_sigma(resumed.action_noise) == pytest.approx(0.1)  # was 0.5: the decay restarted

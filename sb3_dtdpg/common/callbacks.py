@@ -10,7 +10,7 @@ from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from sb3_dtdpg.common.checks import check_folder, check_switches
 from sb3_dtdpg.common.files import atomic_write, remove_temp_files, safe_name
-from sb3_dtdpg.common.noise import decaying_noise, noise_sigma, rearm_noise
+from sb3_dtdpg.common.noise import advance_noise, decaying_noise, noise_sigma, rearm_noise
 from sb3_dtdpg.common.phases import Phase, check_env_phases, parse_phases
 
 
@@ -160,8 +160,9 @@ class CurriculumTransferCallback(BaseCallback):
             if not state["finished"]:
                 # Resume mid-phase: the noise (saved with the model) keeps its schedule position
                 self._set_env_phase(self.phase)
-                if self.model.action_noise is None:
+                if self.model.action_noise is None:  # e.g. load(..., action_noise=None): the phase's noise of now
                     self._arm_noise(self.phase)
+                    advance_noise(self.model.action_noise, state["episodes_in_phase"])
                 if state.get("pending_replay"):  # saved at the transfer step, before the relabelling
                     self._pending_replay = self.phase
                     self._apply_pending_replay()

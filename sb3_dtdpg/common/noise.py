@@ -368,6 +368,22 @@ def _noises(action_noise: ActionNoise) -> list[ActionNoise]:
     return [action_noise]
 
 
+def advance_noise(action_noise: ActionNoise | None, episodes: int) -> None:
+    """
+    Move the decay schedule of a :class:`LinearDecayOUNoise` (or of the copies of one in SB3's
+    ``VectorizedActionNoise``) to ``episodes`` episodes since it was armed: a noise made anew for a curriculum resumed
+    mid-phase goes on at the phase's scale of the moment. Other noises have no schedule and are left alone.
+
+    :param action_noise: the noise (``model.action_noise``; None: nothing)
+    :param episodes: the episodes of the phase so far
+    """
+    if action_noise is None:
+        return
+    for noise in _noises(action_noise):
+        if isinstance(noise, LinearDecayOUNoise):
+            noise._schedule.set_episode(episodes)
+
+
 def rearm_noise(
     action_noise: ActionNoise | None,
     sigma: float | np.ndarray,
