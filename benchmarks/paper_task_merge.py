@@ -29,7 +29,14 @@ from typing import Any
 import pandas as pd
 
 from sb3_dtdpg.experiments.budgets import PUBLIC_BUDGETS, Budget, get_budget
-from sb3_dtdpg.experiments.paper_task import BUDGET_COLUMNS, merge_runs, table_name, task_episodes, write_tables
+from sb3_dtdpg.experiments.paper_task import (
+    BUDGET_COLUMNS,
+    merge_runs,
+    recorded_values,
+    table_name,
+    task_episodes,
+    write_tables,
+)
 
 #: The columns of ``paper_task_runs.csv`` that the merge and the tables read
 REQUIRED_COLUMNS = (
@@ -91,7 +98,7 @@ def check_budget_episodes(name: str, records: pd.DataFrame, channel: str) -> Non
             f"{', '.join(map(str, episodes))} ({hint})"
         )
     for column in BUDGET_COLUMNS:
-        found = sorted(records[column].dropna().unique().tolist(), key=str) if column in records else []
+        found = recorded_values(records, column)
         if found and found != [_budget_value(budget, column)]:
             matching = [
                 other

@@ -74,10 +74,16 @@ class EnvSettingsMismatch(ValueError):
     """A model meets an env built with other settings than it was trained with."""
 
 
+def _inner_vec_env(env: Any) -> Any:
+    """The ``VecEnv`` behind SB3's ``VecEnvWrapper`` layers (VecNormalize, VecMonitor, ...), or ``env`` itself."""
+    while hasattr(env, "venv"):
+        env = env.venv
+    return env
+
+
 def _single_env(env: Any) -> Any:
     """The first single env behind an SB3 ``VecEnv`` (and its wrappers), or ``env`` itself."""
-    while hasattr(env, "venv"):  # VecEnvWrapper (VecNormalize, VecMonitor, ...)
-        env = env.venv
+    env = _inner_vec_env(env)
     if hasattr(env, "envs") and env.envs:  # DummyVecEnv
         return env.envs[0]
     return env
@@ -91,8 +97,7 @@ _WARNED: set[tuple[str, str]] = set()
 
 def _remote_vec_env(env: Any) -> Any:
     """The SB3 ``VecEnv`` behind ``env`` (and its ``VecEnvWrapper``) whose envs live elsewhere, else None."""
-    while hasattr(env, "venv"):
-        env = env.venv
+    env = _inner_vec_env(env)
     if getattr(env, "envs", None) or hasattr(env, "vec_env"):  # DummyVecEnv, MissionVecEnv: read here
         return None
     remote = all(callable(getattr(env, name, None)) for name in ("env_is_wrapped", "get_attr", "set_attr"))

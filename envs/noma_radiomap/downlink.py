@@ -110,12 +110,25 @@ def decoding_order_rows(equivalent_gains: np.ndarray) -> np.ndarray:
 
 
 @compiled
+def signal_band(n_robots: int, bandwidth_per_robot_hz: float, noma: bool) -> float:
+    """
+    The band a robot's signal occupies, per multiple-access mode (docs/MODEL.md, NOMA and OMA; the band of paper
+    Eq. (12)): NOMA, the whole cluster band ``W = U B``; OMA, the robot's own band ``B``. Compiled (the kernels, the
+    downlink, the radio map and the planners call it, or :func:`band_and_noise`): the one implementation.
+
+    :param n_robots: ``U``
+    :param bandwidth_per_robot_hz: ``B`` in Hz
+    :param noma: NOMA (True) or OMA
+    :return: the band in Hz
+    """
+    return n_robots * bandwidth_per_robot_hz if noma else bandwidth_per_robot_hz
+
+
+@compiled
 def band_and_noise(n_robots: int, bandwidth_per_robot_hz: float, noise_w_per_hz: float, noma: bool) -> tuple[float, float]:
     """
-    The band a robot's signal occupies and the noise power over it, per multiple-access mode (docs/MODEL.md, NOMA
-    and OMA; the ``B`` of paper Eq. (12) and the noise of Eq. (8) and (11)): NOMA, the whole cluster band
-    ``W = U B`` and ``N0 W``; OMA, the robot's own band ``B`` and ``N0 B``. Compiled (the kernels, the downlink,
-    the radio map and the planners call it): the one implementation.
+    :func:`signal_band` and the noise power over it (the noise of paper Eq. (8) and (11)): ``N0 W`` in NOMA, ``N0 B``
+    in OMA.
 
     :param n_robots: ``U``
     :param bandwidth_per_robot_hz: ``B`` in Hz
@@ -123,7 +136,7 @@ def band_and_noise(n_robots: int, bandwidth_per_robot_hz: float, noise_w_per_hz:
     :param noma: NOMA (True) or OMA
     :return: the band in Hz and the noise power over it in watts
     """
-    band_hz = n_robots * bandwidth_per_robot_hz if noma else bandwidth_per_robot_hz
+    band_hz = signal_band(n_robots, bandwidth_per_robot_hz, noma)
     return band_hz, noise_w_per_hz * band_hz
 
 
@@ -307,7 +320,7 @@ def transmission_result(sinr: np.ndarray, order: np.ndarray, bandwidth_per_robot
     The outcome of a transmission from its linear SINRs (..., U): the rates (paper Eq. (12), over the cluster band
     ``W = U B`` in NOMA and over ``B`` in OMA), the SINRs in dB and the decoding order as given.
     """
-    band_hz = band_and_noise(sinr.shape[-1], bandwidth_per_robot_hz, 0.0, noma)[0]
+    band_hz = signal_band(sinr.shape[-1], bandwidth_per_robot_hz, noma)
     return DownlinkResult(rate_bps=shannon_rate(sinr, band_hz), sinr_db=sinr_to_db(sinr), decoding_order=order)
 
 

@@ -33,7 +33,15 @@ from scipy.sparse.csgraph import dijkstra
 
 from noma_radiomap import geometry
 from noma_radiomap.compiled import compiled
-from noma_radiomap.downlink import allocate_power, band_and_noise, decoding_order, downlink, equivalent_gain, in_outage
+from noma_radiomap.downlink import (
+    allocate_power,
+    band_and_noise,
+    decoding_order,
+    downlink,
+    equivalent_gain,
+    in_outage,
+    signal_band,
+)
 from noma_radiomap.motion import GridMotion
 from noma_radiomap.propagation import dbm_to_watt
 
@@ -394,7 +402,7 @@ def _band_and_noise(scenario: Any, multiple_access: str) -> tuple[float, float]:
 
 def _qos_sinr(scenario: Any, multiple_access: str) -> float:
     """The SINR a robot needs to meet the QoS rate: ``2^(R / band) - 1`` (NOMA: ``W = U B``, OMA: ``B``)."""
-    band, _ = _band_and_noise(scenario, multiple_access)
+    band = signal_band(scenario.n_robots, scenario.radio.bandwidth_per_robot_hz, multiple_access == "noma")
     return float(2.0 ** (scenario.radio.qos_rate_bps / band) - 1.0)
 
 

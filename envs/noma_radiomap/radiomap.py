@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from noma_radiomap import geometry
-from noma_radiomap.downlink import band_and_noise, in_outage, shannon_rate
+from noma_radiomap.downlink import in_outage, shannon_rate, signal_band
 from noma_radiomap.propagation import (
     EXPECTED_FADING_DB,
     db_to_linear,
@@ -279,9 +279,9 @@ class RadioMap:
             self.path_gain[name] = path_gain(self.path_loss_db[name])
             self.gain[name] = expected_channel_gain(self.path_loss_db[name])
 
-        #: Cluster bandwidth ``W = U x B`` (Hz, the NOMA band of :func:`~noma_radiomap.downlink.band_and_noise`) and
+        #: Cluster bandwidth ``W = U x B`` (Hz, the NOMA band of :func:`~noma_radiomap.downlink.signal_band`) and
         #: the noise power over it (dBm, from the noise density in dBm/Hz: the map's dB scale).
-        self.bandwidth_hz = band_and_noise(scenario.n_robots, radio.bandwidth_per_robot_hz, 0.0, True)[0]
+        self.bandwidth_hz = signal_band(scenario.n_robots, radio.bandwidth_per_robot_hz, True)
         self.noise_dbm = float(noise_power_dbm(radio.noise_dbm_per_hz, self.bandwidth_hz))
         self.power_map_dbm = scenario.ap.max_power_dbm + self.gain_db["ap"]
         names = [i.name for i in scenario.interferers]

@@ -336,6 +336,12 @@ def _training(budget: Budget, channel: str) -> str:
 BUDGET_COLUMNS = ("scenario", "eval_episodes")
 
 
+def recorded_values(records: pd.DataFrame, column: str) -> list[Any]:
+    """:return: the values the runs record in a column of :data:`BUDGET_COLUMNS`, sorted (none where the column is
+    missing: a CSV written before it existed)"""
+    return sorted(records[column].dropna().unique().tolist(), key=str) if column in records else []
+
+
 def merge_runs(run_tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
     """
     The per-run records of several output folders of the experiment as one table, e.g. the ``paper_task_runs.csv``
@@ -353,7 +359,7 @@ def merge_runs(run_tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
     """
     merged = pd.concat(run_tables, ignore_index=True)
     for column in BUDGET_COLUMNS:
-        values = sorted(merged[column].dropna().unique().tolist(), key=str) if column in merged else []
+        values = recorded_values(merged, column)
         if len(values) > 1:
             raise ValueError(
                 f"the runs are of several budgets ({column}: {', '.join(map(repr, values))}): merge the runs of one "
