@@ -352,7 +352,7 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
     from stable_baselines3.common.evaluation import evaluate_policy
 
     from sb3_dtdpg.baselines import make_model, mission_callbacks
-    from sb3_dtdpg.common.files import atomic_write, safe_name
+    from sb3_dtdpg.common.files import atomic_write, safe_name, unused_path
     from sb3_dtdpg.experiments.runs import EpisodeReturnLogger
 
     run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}"
@@ -384,9 +384,10 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
         )
     except KeyboardInterrupt:  # as the RL Zoo does: keep the model so far (no checkpoints to resume from here)
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write(out / f"{run_name}_interrupted.zip", model.save)
+        # A free name: the model of an earlier interruption of the same command stays
+        saved = atomic_write(unused_path(out, f"{run_name}_interrupted", ".zip"), model.save)
         print(
-            f"interrupted after {model.num_timesteps} steps: the model so far is in {out / (run_name + '_interrupted.zip')}; "
+            f"interrupted after {model.num_timesteps} steps: the model so far is in {saved}; "
             f"runs on {args.env} are not checkpointed, the same command starts afresh",
             file=sys.stderr,
         )

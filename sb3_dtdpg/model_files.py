@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from sb3_dtdpg.common.checks import shortened
 from sb3_dtdpg.env_settings import (
     CHECKED,
     RETIRED_BUILTINS,
@@ -159,8 +160,8 @@ class SavedModel:
         broken = non_finite(model.policy.state_dict().items())  # the running statistics of batch norm too
         if broken:
             raise ValueError(
-                f"the model {self.path} holds non-finite weights (NaN or inf) in {', '.join(broken[:3])}"
-                f"{' and more' if len(broken) > 3 else ''}: it was saved after its training diverged"
+                f"the model {self.path} holds non-finite weights (NaN or inf) in {shortened(broken, 3)}: it was saved "
+                "after its training diverged"
             )
         return model
 

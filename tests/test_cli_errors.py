@@ -211,13 +211,17 @@ def test_overrides_reach_the_model(tmp_path, capsys):
     assert model.policy.actor.mu[0].out_features == 8
 
 
-def test_an_interrupted_train_on_another_env_keeps_its_model_and_says_it_starts_afresh(tmp_path, monkeypatch, capsys):
+def test_an_interrupted_train_on_another_env_keeps_its_models_and_says_it_starts_afresh(tmp_path, monkeypatch, capsys):
     from stable_baselines3 import DDPG
 
     from sb3_dtdpg.baselines import load_model
 
     def interrupted(self, *args, **kwargs):
         self.num_timesteps = 70
+        raise KeyboardInterrupt
+
+    def interrupted_later(self, *args, **kwargs):
+        self.num_timesteps = 90
         raise KeyboardInterrupt
 
     monkeypatch.setattr(DDPG, "learn", interrupted)
@@ -227,6 +231,11 @@ def test_an_interrupted_train_on_another_env_keeps_its_model_and_says_it_starts_
     assert "interrupted after 70 steps: the model so far is in" in message and "starts afresh" in message
     assert "resume" not in message  # there is nothing to resume from (was: "run the same command again to resume")
     assert load_model("ddpg", tmp_path / "ddpg_Pendulum-v1_s0_interrupted.zip").num_timesteps == 70
+    monkeypatch.setattr(DDPG, "learn", interrupted_later)
+    assert main([*args, "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]) == 130  # interrupted again
+    second = tmp_path / "ddpg_Pendulum-v1_s0_interrupted_2.zip"
+    assert f"the model so far is in {second};" in capsys.readouterr().err
+    assert load_model("ddpg", second).num_timesteps == 90
     monkeypatch.undo()
     args[args.index("3000")] = "200"
     args += ["--preset", "paper", "--eval-episodes", "1", "--tb", str(tmp_path / "tb"), "--out", str(tmp_path)]

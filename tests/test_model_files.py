@@ -68,11 +68,13 @@ def test_a_policy_alone_or_a_zip_without_its_policy_is_no_model(small_model, tmp
 def test_a_model_with_nan_weights_is_one_error_line_naming_them(small_model, tmp_path, capsys, command):
     model = DTDPG.load(small_model)
     with torch.no_grad():
-        next(model.actor.parameters()).fill_(float("nan"))
+        for parameter in model.actor.parameters():
+            parameter.fill_(float("nan"))
     broken = tmp_path / "nan.zip"
     model.save(broken)
     code = refused([command[0], str(broken), *command[1:]])  # enjoy was a traceback about the env's actions
-    one_error_line(code, capsys.readouterr(), "holds non-finite weights (NaN or inf) in actor.", "training diverged")
+    more = f" and {len(list(model.actor.parameters())) - 3} more: "  # the first three named, then a count
+    one_error_line(code, capsys.readouterr(), "holds non-finite weights (NaN or inf) in actor.", more, "training diverged")
 
 
 def test_a_model_of_a_retired_room_without_its_file_is_told_the_kept_file(tmp_path, capsys):

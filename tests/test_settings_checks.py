@@ -247,3 +247,11 @@ def test_load_refuses_returns_in_replay_buffer_kwargs_that_the_model_would_repla
         DTDPG.load(tmp_path / "model.zip", replay_buffer_kwargs={"n_steps": 5})
     model = DTDPG.load(tmp_path / "model.zip", n_steps=5, replay_buffer_kwargs={"n_steps": 5}, env=gym.make("Pendulum-v1"))
     assert model.replay_buffer.n_steps == 5
+
+
+def test_shortened_lists_name_the_first_items_and_count_the_others():
+    from sb3_dtdpg.common.checks import shortened
+
+    assert shortened(["a", "b"], 3) == "a, b"
+    assert shortened(["a", "b", "c", "d", "e"], 3) == "a, b, c and 2 more"
+    assert shortened(["a", "b", "c", "d"], 2, separator="; ") == "a; b; and 2 more"

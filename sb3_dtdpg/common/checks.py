@@ -1,4 +1,5 @@
-"""Range checks of the numeric settings of SB3's off-policy algorithms, each error naming the field and its value."""
+"""Range checks of the numeric settings of SB3's off-policy algorithms, each error naming the field and its value; the
+shortened lists of error messages."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ __all__ = [
     "check_off_policy_settings",
     "check_switches",
     "check_total_timesteps",
+    "shortened",
 ]
 
 
@@ -220,3 +222,19 @@ def check_folder(owner: str, name: str, path: str | os.PathLike[str] | None) -> 
     """
     if path is not None and os.path.lexists(path) and not os.path.isdir(path):
         raise ValueError(f"{owner}: {name} must be a folder, got the file {os.fspath(path)!r}")
+
+
+def shortened(items: list[str], limit: int, separator: str = ", ") -> str:
+    """
+    The first ``limit`` items joined, and how many more there are: ``"a, b and 3 more"``, ``"a; b; and 3 more"``.
+
+    :param items: the items, as text
+    :param limit: how many to show
+    :param separator: between two items
+    :return: the text
+    """
+    shown = separator.join(items[:limit])
+    if len(items) <= limit:
+        return shown
+    joiner = f"{separator.rstrip()} and" if separator.strip() == ";" else " and"
+    return f"{shown}{joiner} {len(items) - limit} more"

@@ -181,3 +181,21 @@ def safe_name(text: str, max_chars: int = 80) -> str:
     """
     name = re.sub(r"_+", "_", _UNSAFE.sub("_", text).replace("..", "_")).lstrip(".")[:max_chars]
     return name or "_"
+
+
+def unused_path(folder: str | os.PathLike[str], stem: str, suffix: str) -> Path:
+    """
+    A path in ``folder`` that no file holds yet: ``<stem><suffix>``, else ``<stem>_2<suffix>``, ``<stem>_3<suffix>``, ...
+    (so that a second save of the same kind keeps the first).
+
+    :param folder: the folder
+    :param stem: the file name without its suffix
+    :param suffix: the suffix, with its dot (``.zip``)
+    :return: the first free path
+    """
+    folder = Path(folder)
+    path, number = folder / f"{stem}{suffix}", 1
+    while path.exists():
+        number += 1
+        path = folder / f"{stem}_{number}{suffix}"
+    return path

@@ -24,6 +24,7 @@ from multiprocessing.connection import wait as wait_for_ready
 from pathlib import Path
 from typing import Any
 
+from sb3_dtdpg.common.checks import shortened
 from sb3_dtdpg.experiments.specs import RunSpec
 from sb3_dtdpg.experiments.storage import read_progress
 
@@ -124,9 +125,8 @@ class RunReport:
                 f"Incomplete: {len(failed)} of {total} runs failed ({', '.join(failed)}); the table holds only the runs "
                 "that finished, and the same command again trains the failed ones"
             )
-        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
         return (
-            f"Incomplete: {len(missing)} of {total} runs have no result yet ({', '.join(missing[:3])}{more}); the table "
+            f"Incomplete: {len(missing)} of {total} runs have no result yet ({shortened(missing, 3)}); the table "
             "holds only the runs that finished (the same job without --report-only trains the others)"
         )
 
@@ -147,11 +147,10 @@ class RunsFailedError(RuntimeError):
 
     def __init__(self, failed: dict[str, str], out: str | Path):
         self.failed = dict(failed)
-        shown = "; ".join(f"{run_id}: {error}" for run_id, error in list(failed.items())[:3])
-        more = f"; and {len(failed) - 3} more" if len(failed) > 3 else ""
+        shown = shortened([f"{run_id}: {error}" for run_id, error in failed.items()], 3, separator="; ")
         runs = "run" if len(failed) == 1 else "runs"
         super().__init__(
-            f"{len(failed)} {runs} failed ({shown}{more}); the tables and figures in {out} hold only the runs that finished"
+            f"{len(failed)} {runs} failed ({shown}); the tables and figures in {out} hold only the runs that finished"
         )
 
 

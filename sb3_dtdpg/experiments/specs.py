@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.arguments import MAX_SEED
+from sb3_dtdpg.common.checks import shortened
 from sb3_dtdpg.common.files import json_default, safe_name
 
 __all__ = [
@@ -322,8 +323,7 @@ def check_identity(stored: dict[str, Any], expected: dict[str, Any], what: Path)
         other = " (another room of that name)" if names[0] == names[1] else ""
         differences.insert(first, f"scenario: {names[0]!r} stored, {names[1]!r} now{other}")
     if differences:
-        shown = "; ".join(differences[:4]) + (f"; and {len(differences) - 4} more" if len(differences) > 4 else "")
         raise RunMismatchError(
-            f"{what} belongs to another run with the same id ({shown}). Use another output folder "
-            f"or delete {what.parent} to run this one"
+            f"{what} belongs to another run with the same id ({shortened(differences, 4, separator='; ')}). "
+            f"Use another output folder or delete {what.parent} to run this one"
         )

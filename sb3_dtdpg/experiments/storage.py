@@ -19,6 +19,7 @@ from typing import Any
 
 from stable_baselines3.common import logger as sb3_logger
 
+from sb3_dtdpg.common.checks import shortened
 from sb3_dtdpg.common.files import atomic_write, write_json
 from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identity, run_identity
 
@@ -158,8 +159,7 @@ def load_results(
     if len(problems) == 1:
         raise first
     others = [str(result_path(out, spec).parent) for spec, _ in problems[1:]]
-    shown = ", ".join(others[:5]) + (f" and {len(others) - 5} more" if len(others) > 5 else "")
-    raise type(first)(f"{first}; {len(others)} more stored runs do not fit either: {shown}") from None
+    raise type(first)(f"{first}; {len(others)} more stored runs do not fit either: {shortened(others, 5)}") from None
 
 
 def read_progress(out: str | Path, spec: RunSpec) -> dict[str, Any] | None:
