@@ -10,7 +10,7 @@ from stable_baselines3 import DDPG, SAC, TD3
 from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
-from sb3_dtdpg import DTDPG
+from sb3_dtdpg import DTDPG, presets
 from sb3_dtdpg.baselines import (
     ALGORITHMS,
     DDPG_OU_SIGMA,
@@ -20,6 +20,7 @@ from sb3_dtdpg.baselines import (
     make_model,
     reward_phase,
 )
+from sb3_dtdpg.dtdpg.lean import LeanDDPG
 
 ZOO_CONFIGS = Path(__file__).resolve().parents[1] / "zoo_configs"
 
@@ -41,13 +42,35 @@ def test_every_algorithm_trains_in_both_modes(algo, multiple_access):
 def test_ddpg_is_the_papers_plain_baseline():
     env = make_env("ddpg", env_kwargs={"scenario": "small"})
     model = make_model("ddpg", env, seed=0)
-    assert type(model) is DDPG and not isinstance(model, DTDPG)
+    assert type(model) is LeanDDPG and isinstance(model, DDPG) and not isinstance(model, DTDPG)
     assert env.unwrapped.reward_phase == "combined"
     # Plain MLP (no batch norm), DT-DPG's sizes and Table I hyperparameters, constant OU noise.
     assert not any(isinstance(m, th.nn.BatchNorm1d) for m in model.policy.modules())
     assert (model.learning_rate, model.batch_size, model.tau, model.buffer_size) == (1e-4, 64, 0.002, 50_000)
     assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
     np.testing.assert_allclose(model.action_noise.sigma, DDPG_OU_SIGMA)
+
+
+@pytest.mark.parametrize("hyperparams", ["paper", "tuned"])
+def test_the_ddpg_baseline_trains_as_sb3s_own_ddpg_bit_for_bit(hyperparams):
+    """make_model("ddpg") runs SB3's DDPG with the lean step: the weights, batch for batch, are SB3's DDPG's."""
+    short = dict(learning_starts=50, batch_size=16, buffer_size=2_000)
+    models = []
+    for build in ("make_model", "sb3"):
+        env = make_env("ddpg", env_kwargs={"scenario": "small"})
+        if build == "make_model":
+            model = make_model("ddpg", env, seed=5, hyperparams=hyperparams, **short)
+        else:
+            options = presets.model_kwargs("ddpg", hyperparams, env.action_space, curriculum=False)
+            model = DDPG("MlpPolicy", env, seed=5, **{**options, **short})
+        models.append(model.learn(400))
+    lean, sb3 = models
+    assert type(sb3) is DDPG and sb3.actor.optimizer.state  # SB3's generic step has trained
+    assert lean._n_updates == sb3._n_updates > 300
+    lean_state, sb3_state = lean.policy.state_dict(), sb3.policy.state_dict()
+    assert lean_state.keys() == sb3_state.keys()
+    for name, value in sb3_state.items():
+        assert th.equal(lean_state[name], value), name
 
 
 def test_dtdpg_starts_in_the_destination_phase_and_others_use_the_combined_reward():
