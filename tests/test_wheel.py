@@ -9,6 +9,7 @@ import shutil
 import subprocess
 import sys
 import sysconfig
+import tarfile
 import zipfile
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -47,6 +48,34 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     run(sys.executable, "-m", "pip", "wheel", "--no-deps", *isolation, "-q", "-w", root / "dist", source, cwd=root)
     (path,) = (root / "dist").glob("sb3_dtdpg-*.whl")
     return path
+
+
+def test_the_source_distribution_runs_its_own_tests(tmp_path: Path) -> None:
+    """The sdist holds what its tests read (their helpers, the docs they check, the scripts they run): they collect."""
+    if _setuptools_version() < (77,):
+        pytest.skip("building this pyproject needs setuptools >= 77 (the tests extra)")
+    source = tmp_path / "src"
+    shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(*IGNORED))
+    build = "import sys; from setuptools import build_meta; print('SDIST', build_meta.build_sdist(sys.argv[1]))"
+    output = run(sys.executable, "-c", build, tmp_path / "dist", cwd=source)
+    (name,) = [line.split()[1] for line in output.splitlines() if line.startswith("SDIST ")]
+    with tarfile.open(tmp_path / "dist" / name) as sdist:
+        sdist.extractall(tmp_path / "unpacked", filter="data")
+    (unpacked,) = (tmp_path / "unpacked").iterdir()
+    expected = {
+        p.relative_to(REPO).as_posix()
+        for folder in ("tests", "docs", "examples", "benchmarks", "zoo_configs")
+        for p in (REPO / folder).rglob("*")
+        if p.is_file() and "__pycache__" not in p.parts and not p.name.startswith(".")
+    }
+    held = {p.relative_to(unpacked).as_posix() for p in unpacked.rglob("*") if p.is_file()}
+    assert expected - held == set()
+    # The wheel built from the sdist, as `python -m build` makes it: setuptools finds each folder of package data listed
+    build = "import sys; from setuptools import build_meta; print('WHEEL', build_meta.build_wheel(sys.argv[1]))"
+    output = run(sys.executable, "-c", build, tmp_path / "wheel", cwd=unpacked)
+    assert "is absent from the `packages` configuration" not in output
+    collected = run(sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider", "tests", cwd=unpacked)
+    assert "error" not in collected.lower().splitlines()[-1] and "tests collected" in collected
 
 
 @pytest.fixture(scope="module")
