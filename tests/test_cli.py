@@ -134,6 +134,28 @@ def test_a_timestep_budget_sizes_the_destination_phase_by_the_episodes_it_holds(
     assert build_model(spec, env, _init_setup_model=False).phases[0].n_episodes == 6
 
 
+def test_ddpg_runs_stored_when_the_set_ran_sb3s_own_ddpg_class_are_the_same_runs(tmp_path):
+    """The set's ddpg became LeanDDPG (SB3's DDPG, bit for bit): runs stored with SB3's class name stay this run's."""
+    from stable_baselines3 import TD3
+
+    from sb3_dtdpg.dtdpg.lean import LeanDDPG, LeanTD3
+    from sb3_dtdpg.experiments.specs import _SAME_RESULT_ALGORITHMS, RunMismatchError, check_identity, identity_digest
+
+    def name(cls):
+        return f"{cls.__module__}.{cls.__qualname__}"
+
+    assert _SAME_RESULT_ALGORITHMS == {name(LeanDDPG): name(DDPG), name(LeanTD3): name(TD3)}  # the names as recorded
+    identity = run_identity(RunSpec("ddpg", "noma", 0, 20, scenario="small", hyperparams="paper"))
+    assert identity["hyperparameters"]["algorithm"] == name(LeanDDPG)
+    stored = json.loads(json.dumps(identity))
+    stored["hyperparameters"]["algorithm"] = name(DDPG)  # as written before the change (was: "another run")
+    check_identity({"identity": stored}, identity, tmp_path / "result.json")
+    assert identity_digest(stored) == identity_digest(identity)
+    stored["hyperparameters"]["algorithm"] = name(TD3)  # another algorithm is still another run
+    with pytest.raises(RunMismatchError, match=r"hyperparameters.algorithm: 'stable_baselines3.td3.td3.TD3' stored"):
+        check_identity({"identity": stored}, identity, tmp_path / "result.json")
+
+
 def test_a_timestep_budget_is_recorded_as_such_not_with_the_unused_episodes_default(tmp_path, monkeypatch, capsys):
     # train --timesteps recorded episodes=500 (--episodes' default, unused) in the run's spec and identity
     from sb3_dtdpg.experiments.specs import RunMismatchError, check_identity
@@ -218,11 +240,17 @@ def test_reproduce_skips_finished_runs(tmp_path):
     for name in ("table_ii.md", "ddpg_vs_dtdpg.md", "learning_rates.md", "paired.md", *figures):
         assert (tmp_path / name).exists(), name
     assert (tmp_path / "fig_trajectories_noma_oma.png").exists()
-    paired = tables["paired"].set_index(["contrast", "multiple_access"])
+    paired = tables["paired"]
+
+    def paired_mqi(contrast: str, mode: str) -> float:
+        # the one row of the contrast in the mode (the rows of "NOMA - OMA" have no mode: on a (contrast, mode) index,
+        # which then repeats, pandas 2.0's .loc gives a Series of the row, later pandas its value)
+        return paired.loc[(paired["contrast"] == contrast) & (paired["multiple_access"] == mode), "mqi"].item()
+
     # the fake results all score 12345: the paired differences are 0 except against the one real run
-    real_vs_fake = paired.loc[("DT-DPG - DDPG", "OMA"), "mqi"]
+    real_vs_fake = paired_mqi("DT-DPG - DDPG", "OMA")
     assert real_vs_fake == pytest.approx(12345.0 - real["eval"]["summary"]["mqi"])
-    assert paired.loc[("DT-DPG - DDPG", "NOMA"), "mqi"] == 0.0
+    assert paired_mqi("DT-DPG - DDPG", "NOMA") == 0.0
 
 
 def test_reproduce_with_tuned_hyperparameters_compares_the_paper_learning_rate():

@@ -494,7 +494,14 @@ def test_remove_temp_files_of_named_files_only(tmp_path):
 def test_the_env_works_without_a_writable_numba_cache():
     # No cache locator available (a read-only install and home folder): the env's loops are compiled in the
     # process, with one warning, instead of failing at import
-    code = textwrap.dedent(
+    import numba.core.config
+
+    env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "numba.core.caching.IPythonCacheLocator"}
+    # an older numba (e.g. the floor, 0.59) reads no NUMBA_CACHE_LOCATOR_CLASSES: the same locators are set by hand
+    by_hand = "from numba.core import caching; caching.CacheImpl._locator_classes = [caching._IPythonCacheLocator]"
+    if hasattr(numba.core.config, "CACHE_LOCATOR_CLASSES"):
+        by_hand = ""
+    code = by_hand + textwrap.dedent(
         """
         import warnings
         with warnings.catch_warnings(record=True) as caught:
@@ -507,7 +514,6 @@ def test_the_env_works_without_a_writable_numba_cache():
         print(sum("no writable cache folder" in str(w.message) for w in caught))
         """
     )
-    env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "numba.core.caching.IPythonCacheLocator"}
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "1"

@@ -436,9 +436,13 @@ def test_numpy_scalars_and_arrays_are_numbers_and_lists(small_dict):
     assert scenario == Scenario.from_dict(small_dict)
     assert type(scenario.room.width) is float and type(scenario.mission.max_steps) is int
     assert all(type(x) is float for x in scenario.ap.position + scenario.robots[0].destinations[0])
+
+    def shown(value):  # the value and its type, as numpy shows them: np.True_ (bool) in numpy 2, True (bool_) in numpy 1
+        return re.escape(f"{value!r} ({type(value).__name__})")
+
     for value, pattern in [
-        (np.bool_(True), r"room\.width: expected a number, got np\.True_ \(bool\)"),
-        (np.complex64(12.0), r"room\.width: expected a number, got np\.complex64"),
+        (np.bool_(True), r"room\.width: expected a number, got " + shown(np.bool_(True))),
+        (np.complex64(12.0), r"room\.width: expected a number, got " + shown(np.complex64(12.0))),
         (np.float32(np.nan), r"room\.width: expected a finite number, got nan"),
         (np.array(12.0), r"room\.width: expected a number, got array\(12\.\) \(ndarray\)"),
     ]:
@@ -447,7 +451,7 @@ def test_numpy_scalars_and_arrays_are_numbers_and_lists(small_dict):
             Scenario.from_dict(data)
     data["room"]["width"] = 12.0
     data["mission"]["max_steps"] = np.bool_(True)
-    with pytest.raises(ValueError, match=r"mission\.max_steps: expected an integer, got np\.True_ \(bool\)"):
+    with pytest.raises(ValueError, match=r"mission\.max_steps: expected an integer, got " + shown(np.bool_(True))):
         Scenario.from_dict(data)
     data["mission"]["max_steps"] = 60
     data["robots"][0]["destinations"] = np.array([[True, False]])

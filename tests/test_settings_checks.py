@@ -42,8 +42,12 @@ TINY = dict(policy_kwargs=dict(net_arch=[8]), learning_starts=10, batch_size=8)
         (dict(train_freq=[2, "episode"]), "train_freq must be a Python integer >= 1 or a tuple"),  # SB3 refuses lists
         (
             dict(train_freq=np.int64(2)),
-            "train_freq must be a Python integer >= 1 or a tuple (frequency, unit) with one, got np.int64(2)",
-        ),  # ... and numpy integers
+            "train_freq must be a Python integer >= 1 or a tuple (frequency, unit) with one, got 2 (numpy.int64)",
+        ),  # ... and numpy integers, named with their type (numpy 1 shows np.int64(2) as a bare 2)
+        (
+            dict(train_freq=(np.int32(2), "episode")),
+            "train_freq must be a Python integer >= 1 or a tuple (frequency, unit) with one, got (2 (numpy.int32), 'episode')",
+        ),
         (dict(train_freq=(2, "epoch")), "the unit of train_freq must be 'step' or 'episode', got 'epoch'"),
         (dict(gradient_steps=-2), "gradient_steps must be an integer >= 0, or -1, got -2"),
         (dict(gradient_steps=1.5), "gradient_steps must be an integer >= 0, or -1, got 1.5"),
@@ -255,3 +259,5 @@ def test_shortened_lists_name_the_first_items_and_count_the_others():
     assert shortened(["a", "b"], 3) == "a, b"
     assert shortened(["a", "b", "c", "d", "e"], 3) == "a, b, c and 2 more"
     assert shortened(["a", "b", "c", "d"], 2, separator="; ") == "a; b; and 2 more"
+    with pytest.raises(ValueError, match="limit must be an integer >= 1, got 0"):
+        shortened(["a", "b"], 0)  # was " and 2 more"

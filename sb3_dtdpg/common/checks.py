@@ -50,8 +50,13 @@ def _train_freq(owner: str, value: Any) -> None:
     else:
         frequency, unit = value, "step"
     if type(frequency) is not int or frequency < 1:  # SB3 takes a Python int only (not a list, nor a numpy integer)
+        if isinstance(frequency, np.integer):  # named with its type: numpy 1 shows np.int64(2) as a bare 2
+            shown = f"{frequency} (numpy.{type(frequency).__name__})"
+            shown = f"({shown}, {unit!r})" if isinstance(value, tuple) else shown
+        else:
+            shown = repr(value)
         raise ValueError(
-            f"{owner}: train_freq must be a Python integer >= 1 or a tuple (frequency, unit) with one, got {value!r}"
+            f"{owner}: train_freq must be a Python integer >= 1 or a tuple (frequency, unit) with one, got {shown}"
         )
     if getattr(unit, "value", unit) not in ("step", "episode"):  # a string or SB3's TrainFrequencyUnit
         raise ValueError(f"{owner}: the unit of train_freq must be 'step' or 'episode', got {unit!r}")
@@ -229,10 +234,12 @@ def shortened(items: list[str], limit: int, separator: str = ", ") -> str:
     The first ``limit`` items joined, and how many more there are: ``"a, b and 3 more"``, ``"a; b; and 3 more"``.
 
     :param items: the items, as text
-    :param limit: how many to show
+    :param limit: how many to show, at least 1
     :param separator: between two items
     :return: the text
     """
+    if not _is_int(limit) or limit < 1:
+        raise ValueError(f"limit must be an integer >= 1, got {limit!r}")
     shown = separator.join(items[:limit])
     if len(items) <= limit:
         return shown

@@ -272,11 +272,19 @@ def _differences(stored: Any, expected: Any, path: str = "") -> list[str]:
 #: the same weights bit for bit as SB3's generic step (``tests/test_lean_step.py``). They are recorded but not compared,
 #: so results stored before they existed, or with them switched off, stay this run's.
 _SAME_RESULT_SETTINGS = ("lean", "backprop")
+#: Algorithms recorded by their class that give another class's weights bit for bit: SB3's DDPG and TD3 with the lean
+#: step (:class:`~sb3_dtdpg.dtdpg.lean.LeanDDPG`, the algorithm set's ``ddpg``, and ``LeanTD3``). They are compared as
+#: SB3's class, so that runs stored before the set used them stay this run's.
+_SAME_RESULT_ALGORITHMS = {
+    "sb3_dtdpg.dtdpg.lean.LeanDDPG": "stable_baselines3.ddpg.ddpg.DDPG",
+    "sb3_dtdpg.dtdpg.lean.LeanTD3": "stable_baselines3.td3.td3.TD3",
+}
 
 
 def _compared(identity: dict[str, Any]) -> dict[str, Any]:
     """
-    :return: the identity without :data:`_SAME_RESULT_SETTINGS`, and without the name the scenario was given by
+    :return: the identity without :data:`_SAME_RESULT_SETTINGS` (and the algorithms of :data:`_SAME_RESULT_ALGORITHMS`
+        as the classes they give the weights of), and without the name the scenario was given by
         where the identity holds the scenario's content, which decides (None for the env id's default, ``"mall"``,
         or a file of the same content are one run), and without the episodes count of a run of a budget in
         timesteps (it trains for those; runs stored with the CLI's unused ``--episodes`` default stay this run's)
@@ -290,6 +298,8 @@ def _compared(identity: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(hyperparameters, dict):
         return identity
     kept = {k: v for k, v in hyperparameters.items() if k not in _SAME_RESULT_SETTINGS}
+    if kept.get("algorithm") in _SAME_RESULT_ALGORITHMS:
+        kept["algorithm"] = _SAME_RESULT_ALGORITHMS[kept["algorithm"]]
     return {**identity, "hyperparameters": kept}
 
 
