@@ -95,7 +95,7 @@ def algorithm_class(algo: str) -> type[BaseAlgorithm]:
 
 def load_model(algo: str, path: Any, **kwargs: Any) -> BaseAlgorithm:
     """
-    SB3's ``load`` of a saved model of ``algo``, without the warning SB3 2.9 gives on reloading its own n-step
+    SB3's ``load`` of a saved model of ``algo``, without the warning SB3 2.9.2 gives on reloading its own n-step
     models ("`n_steps=3` is ignored because a custom `replay_buffer_class` ... was passed": the saved buffer
     settings are restored all the same).
 
