@@ -392,12 +392,13 @@ class CommAwarePlanner(GridPlanner):
         return self._grid[best]
 
 
-def _band_and_noise(scenario: Any, multiple_access: str) -> tuple[float, float]:
-    """A robot's band in Hz and the noise power over it in watts in the mode (NOMA: ``W = U B``, OMA: ``B``;
+def _noise_w(scenario: Any, multiple_access: str) -> float:
+    """The noise power in watts over a robot's band in the mode (NOMA: ``W = U B``, OMA: ``B``;
     :func:`~noma_radiomap.downlink.band_and_noise`, the env's)."""
     radio = scenario.radio
     noise_w_per_hz = float(dbm_to_watt(radio.noise_dbm_per_hz))
-    return band_and_noise(scenario.n_robots, radio.bandwidth_per_robot_hz, noise_w_per_hz, multiple_access == "noma")
+    noma = multiple_access == "noma"
+    return band_and_noise(scenario.n_robots, radio.bandwidth_per_robot_hz, noise_w_per_hz, noma)[1]
 
 
 def _qos_sinr(scenario: Any, multiple_access: str) -> float:
@@ -418,7 +419,7 @@ def _least_powers(
     """
     n_robots = scenario.n_robots
     gamma = _qos_sinr(scenario, multiple_access)
-    _, noise_w = _band_and_noise(scenario, multiple_access)
+    noise_w = _noise_w(scenario, multiple_access)
     if multiple_access == "oma":
         need = gamma * (interference_w / n_robots + noise_w) / gain
         return np.where(served, need, 0.0)
@@ -982,7 +983,7 @@ def rayleigh_success(
     """
     n_robots = scenario.n_robots
     gamma = _qos_sinr(scenario, multiple_access)
-    _, noise = _band_and_noise(scenario, multiple_access)
+    noise = _noise_w(scenario, multiple_access)
     g = gain[..., None, :]
     m = interferer_w[..., None, :, :]
     if multiple_access == "oma":
