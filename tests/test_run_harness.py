@@ -25,6 +25,7 @@ from sb3_dtdpg.experiments.runs import (
     RunsFailedError,
     RunSpec,
     output_lock,
+    prepare_run,
     result_path,
     run_many,
     run_one,
@@ -458,6 +459,75 @@ def test_a_run_interrupted_in_its_evaluations_is_evaluated_again_not_trained_aga
     assert {k: v for k, v in resumed["train"].items() if k not in ("wall_s", "steps_per_s")} == {
         k: v for k, v in uninterrupted["train"].items() if k not in ("wall_s", "steps_per_s")
     }
+
+
+def _interrupted_in_its_evaluations(monkeypatch, out):
+    """Train ``SPEC`` into ``out`` as a ``compare`` worker does, and interrupt it in its test episodes."""
+    from sb3_dtdpg.experiments import runs
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr(runs, "_evaluations", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            runs._worker(SPEC, str(out), prepare_run(SPEC))
+    return out / "runs" / SPEC.run_id
+
+
+def test_a_compare_run_interrupted_in_its_evaluations_is_evaluated_again_not_trained_again(tmp_path, monkeypatch):
+    from sb3_dtdpg.experiments import runs
+
+    run_dir = _interrupted_in_its_evaluations(monkeypatch, tmp_path / "a")
+    trained_bytes = (run_dir / "model.zip").read_bytes()
+    with monkeypatch.context() as patch:  # was: trained again from its start
+        patch.setattr(runs, "_train", lambda *args, **kwargs: pytest.fail("trained again"))
+        runs._worker(SPEC, str(tmp_path / "a"), prepare_run(SPEC))
+    retested = json.loads(result_path(tmp_path / "a", SPEC).read_text())
+    assert (run_dir / "model.zip").read_bytes() == trained_bytes and not (run_dir / "trained.json").exists()
+    uninterrupted = run_one(SPEC, tmp_path / "b")
+    assert json.dumps(retested["eval"], sort_keys=True) == json.dumps(uninterrupted["eval"], sort_keys=True)  # NaN CIs
+    assert retested["train"]["timesteps"] == uninterrupted["train"]["timesteps"]
+
+
+@pytest.mark.parametrize("leftover", ["resumed training", "another run's", "unreadable model"])
+def test_a_compare_run_retrains_leftovers_that_are_not_its_uninterrupted_training(tmp_path, monkeypatch, leftover):
+    """Only a training that ran from its start in one go is this run's as compare would train it: a record of a
+    training resumed from a checkpoint (``sb3-dtdpg train``), of another identity, or beside a damaged model is a
+    leftover, trained again (not an error, not tested as this run)."""
+    from sb3_dtdpg.experiments import runs
+
+    run_dir = _interrupted_in_its_evaluations(monkeypatch, tmp_path)
+    record = json.loads((run_dir / "trained.json").read_text())
+    if leftover == "resumed training":
+        record["train"]["resumed_at_episode"] = 1
+    elif leftover == "another run's":
+        record["identity"]["spec"]["eval_episodes"] = 7
+    else:
+        (run_dir / "model.zip").write_bytes(b"not a zip")
+    (run_dir / "trained.json").write_text(json.dumps(record))
+
+    class TrainedAgain(Exception):
+        pass
+
+    def train(*args, **kwargs):
+        raise TrainedAgain
+
+    monkeypatch.setattr(runs, "_train", train)
+    with pytest.raises(TrainedAgain):
+        runs._worker(SPEC, str(tmp_path), prepare_run(SPEC))
+    assert not (run_dir / "trained.json").exists()
+
+
+def test_a_distributed_run_interrupted_in_its_evaluations_is_evaluated_again(tmp_path, monkeypatch):
+    pytest.importorskip("optuna")
+    from sb3_dtdpg.experiments import runs
+    from sb3_dtdpg.experiments.distributed import run_study_worker
+
+    _interrupted_in_its_evaluations(monkeypatch, tmp_path / "out")
+    monkeypatch.setattr(runs, "_train", lambda *args, **kwargs: pytest.fail("trained again"))
+    assert run_study_worker([SPEC], tmp_path / "out", str(tmp_path / "study.log"), "job") == [SPEC.run_id]
+    assert result_path(tmp_path / "out", SPEC).exists()
 
 
 def test_train_interrupted_in_its_test_episodes_says_the_model_is_saved(tmp_path, monkeypatch, capsys):

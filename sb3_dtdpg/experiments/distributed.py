@@ -16,6 +16,7 @@ options on the CLI later find the same runs)::
 
 import argparse
 import dataclasses
+import functools
 import hashlib
 import json
 import sys
@@ -97,13 +98,17 @@ def _lock_is_free(path: Path) -> bool:
         return free
 
 
+#: How a worker runs one spec: a run interrupted in its evaluations is evaluated again, not trained again.
+_retest_or_run = functools.partial(run_one, retest=True)
+
+
 def run_study_worker(
     specs: list[RunSpec],
     out: str | Path,
     storage: Any,
     study_name: str,
     n_runs: int | None = None,
-    run: Callable[[RunSpec, str | Path], Any] = run_one,
+    run: Callable[[RunSpec, str | Path], Any] = _retest_or_run,
 ) -> list[str]:
     """
     Take runs from a shared Optuna study until every run is finished, trained by another worker, or failed.
@@ -121,7 +126,8 @@ def run_study_worker(
     :param storage: an Optuna storage or its URL (a ``.log`` path: a ``JournalFileStorage``)
     :param study_name: the study shared by the workers of one job
     :param n_runs: stop after training this many runs (None: until no run is left to take)
-    :param run: the function that runs one spec (tests pass a cheap one)
+    :param run: the function that runs one spec (default: :func:`run_one`, which evaluates a run interrupted in its
+        evaluations again instead of training it again; tests pass a cheap one)
     :return: the run ids this worker trained
     :raises OutputBusyError: a ``compare`` / ``reproduce`` job holds the folder
     :raises RunMismatchError: stored results in the folder are other runs' (checked for every run first, as

@@ -168,9 +168,10 @@ def run_in_pool(
     failed run does not take the others down.
 
     When the call ends early (Ctrl-C, SIGTERM, an error), the workers are killed and gone before it returns: the
-    runs in progress are abandoned (they start afresh next time) and no queued run starts, so that the caller
-    releases its folder lock only when nothing writes to the folder any more. Ctrl-C raises ``KeyboardInterrupt``;
-    SIGTERM (when it has its default action) then ends the process as it would have.
+    runs in progress are abandoned (next time they start afresh, or are tested again if their training had ended)
+    and no queued run starts, so that the caller releases its folder lock only when nothing writes to the folder
+    any more. Ctrl-C raises ``KeyboardInterrupt``; SIGTERM (when it has its default action) then ends the process
+    as it would have.
 
     :param work: a module-level function (it is sent to spawned processes) returning the run id and its seconds
     :param jobs: the arguments of each call, the run's spec first

@@ -315,6 +315,7 @@ def run_one(
     tensorboard_dir: str | Path | None = None,
     checkpoint_every: int | None = None,
     resume: bool = False,
+    retest: bool = False,
     threads: int | None = 1,
     progress_bar: bool = False,
     verbose: int = 0,
@@ -337,6 +338,9 @@ def run_one(
     interrupted in its evaluations is evaluated again (its trained ``model.zip``, :data:`TRAINED_RECORD`), and one
     interrupted in training continues from its last checkpoint (model, replay buffer, action noise and curriculum
     state; not the environment's random state, so a resumed run is not bit-identical to an uninterrupted one).
+    With ``retest`` alone, only a run interrupted in its evaluations is taken up (evaluated again, as with
+    ``resume``) and only when its training ran from the start in one go, so that the result is the uninterrupted
+    run's; any other leftover is removed as without ``resume``.
 
     :param spec: the run
     :param out: output folder
@@ -346,6 +350,8 @@ def run_one(
         writes into another run's logs
     :param checkpoint_every: save a checkpoint every this many episodes (None: none)
     :param resume: reuse a finished result or the last checkpoint (both checked against :func:`run_identity`)
+    :param retest: evaluate a run interrupted in its evaluations again instead of training it again (what
+        ``compare`` and ``reproduce`` do; implied by ``resume``)
     :param threads: torch threads (None: torch's default; 1 in parallel workers)
     :param progress_bar: show SB3's progress bar
     :param verbose: SB3 verbosity
@@ -378,6 +384,10 @@ def run_one(
         if trained is not None:  # interrupted in its evaluations: the trained model is evaluated, not trained again
             return _record_result(spec, out, _load_trained(spec, run_dir, verbose), trained, n_trajectories)
         checkpoint = read_checkpoint(run_dir, identity)
+    elif retest:
+        trained = _uninterrupted_training(run_dir, identity, spec, verbose)
+        if trained is not None:
+            return _record_result(spec, out, *trained, n_trajectories)
     tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
     with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):
         if checkpoint is None:  # leftovers of an interrupted attempt: start afresh
@@ -441,6 +451,24 @@ def _train_and_record(
     return _record_result(spec, out, model, trained, n_trajectories)
 
 
+def _uninterrupted_training(
+    run_dir: Path, identity: dict[str, Any], spec: RunSpec, verbose: int
+) -> tuple[Any, dict[str, Any]] | None:
+    """
+    :return: the trained model and its record of a run that trained from its start in one go and was interrupted
+        in its evaluations (None: none, or leftovers that are not such a run's, to be removed as without ``resume``:
+        another run's, damaged, or of a training resumed from a checkpoint)
+    """
+    try:
+        trained = read_trained(run_dir, identity)
+        train = None if trained is None else trained.get("train")
+        if not isinstance(train, dict) or train.get("resumed_at_episode") is not None:
+            return None
+        return _load_trained(spec, run_dir, verbose), trained
+    except (RunMismatchError, DamagedRecordError):
+        return None
+
+
 def _load_trained(spec: RunSpec, run_dir: Path, verbose: int) -> Any:
     """:return: the run's trained model (``model.zip``, beside its :data:`TRAINED_RECORD`)
     :raises DamagedRecordError: it cannot be loaded"""
@@ -477,7 +505,7 @@ def _record_result(spec: RunSpec, out: Path, model: Any, trained: dict[str, Any]
 
 def _worker(spec: RunSpec, out: str, identity: dict[str, Any]) -> tuple[str, float]:
     start = time.perf_counter()
-    run_one(spec, out, identity=identity)
+    run_one(spec, out, identity=identity, retest=True)
     return spec.run_id, time.perf_counter() - start
 
 
@@ -493,7 +521,8 @@ def run_many(
 
     Runs whose result file exists are skipped (resumable), after checking that the stored result is this run's
     (:func:`run_identity`). Each run writes its files as soon as it ends, so an interruption loses only the
-    runs in progress (they start afresh next time). Hold :func:`output_lock` around a job that calls this.
+    runs in progress: they start afresh next time, except a run interrupted in its evaluations, which is evaluated
+    again (``run_one``'s ``retest``). Hold :func:`output_lock` around a job that calls this.
 
     :param specs: the runs
     :param out: output folder
