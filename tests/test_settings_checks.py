@@ -192,6 +192,31 @@ def test_a_run_spec_with_an_unknown_override_is_refused_before_training():
         run_identity(spec)
 
 
+def test_a_run_spec_is_the_same_run_whatever_the_order_of_its_overrides():
+    from sb3_dtdpg.experiments.specs import RunSpec, run_identity
+
+    given = (("tau", "0.01"), ("gamma", "0.9"))
+    spec, reordered = (RunSpec("dtdpg", "noma", 0, 3, scenario="small", overrides=pairs) for pairs in (given, given[::-1]))
+    assert spec == reordered and spec.run_id == reordered.run_id  # was: two run ids, the run trained twice
+    assert run_identity(spec) == run_identity(reordered)
+    assert spec.override_kwargs == {"gamma": 0.9, "tau": 0.01}
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ((("gamma", "0.9"), ("gamma", "0.8")), "each hyperparameter once"),
+        ((("gamma", 0.9),), "pairs of strings"),
+        (("gamma",), "pairs of strings"),
+    ],
+)
+def test_a_run_spec_refuses_overrides_that_are_not_one_pair_per_hyperparameter(overrides, message):
+    from sb3_dtdpg.experiments.specs import RunSpec
+
+    with pytest.raises(ValueError, match=rf"RunSpec.overrides: .*{message}.*got {re.escape(repr(overrides))}"):
+        RunSpec("dtdpg", "noma", 0, 3, overrides=overrides)
+
+
 def test_an_action_noise_of_another_shape_is_refused_at_construction():
     from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise, VectorizedActionNoise
 

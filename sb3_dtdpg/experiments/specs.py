@@ -79,7 +79,8 @@ class RunSpec:
         ``"destinations"`` (the same without the goal features) or ``"paper"`` (Eq. (24): positions and gains only).
         The run id names it unless it is ``"paper"`` (so the ids of runs stored before the layouts were renamed stay)
     :param overrides: single hyperparameters over the set, ``(name, Python literal)`` pairs (``sb3-dtdpg train
-        --hyperparams``; :mod:`sb3_dtdpg.overrides`); a run with overrides gets ``_hp<digest>`` in its id
+        --hyperparams``; :mod:`sb3_dtdpg.overrides`), kept in name order; a run with overrides gets ``_hp<digest>``
+        in its id
     :param power_mapping: how the power actions become powers, in training and in the test
         (:data:`noma_radiomap.registration.POWER_MAPPINGS`): ``"paper"`` (the env's own) or ``"shares"`` (shares of
         ``P_max``, :class:`noma_radiomap.wrappers.PowerShares`; the run id ends in ``_shares``)
@@ -121,6 +122,13 @@ class RunSpec:
         for name in ("channel", "eval_channel"):
             if getattr(self, name) not in _CHANNELS:
                 raise ValueError(f"RunSpec.{name}: expected one of {_CHANNELS}, got {getattr(self, name)!r}")
+        names = [pair[0] if isinstance(pair, tuple) and len(pair) == 2 else None for pair in self.overrides]
+        if not all(isinstance(name, str) for name in names) or not all(isinstance(p[1], str) for p in self.overrides):
+            raise ValueError(f"RunSpec.overrides: expected (name, Python literal) pairs of strings, got {self.overrides!r}")
+        if len(set(names)) != len(names):
+            raise ValueError(f"RunSpec.overrides: each hyperparameter once, got {self.overrides!r}")
+        # in name order, so that the run id and identity do not depend on the order they were given in
+        object.__setattr__(self, "overrides", tuple(sorted(self.overrides)))
         if not isinstance(self.tag, str) or (self.tag and safe_name(self.tag) != self.tag):
             raise ValueError(f"RunSpec.tag: expected letters, digits and ._+- (part of a folder name), got {self.tag!r}")
 
