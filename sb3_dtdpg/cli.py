@@ -20,52 +20,24 @@ as argparse reports a bad option, before anything is created. Abbreviated option
 ``--preset`` picks a hyperparameter set (``tuned``, ``paper``); ``--hyperparams key:value ...`` overrides single
 values, as in the RL Zoo. ``sb3-dtdpg --help`` imports neither torch nor Stable-Baselines3: the commands import
 what they need when they run.
+
+The parser (the options, their types and help texts) is :func:`sb3_dtdpg.cli_parser.build_parser`; this module holds
+the commands, and :func:`main` runs the one the parser's ``command`` names.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from sb3_dtdpg.arguments import MAX_SEED as _MAX_SEED
-from sb3_dtdpg.arguments import checked, positive_int
-from sb3_dtdpg.arguments import seed_count as _seed_count
-from sb3_dtdpg.arguments import seed_int as _seed
+from sb3_dtdpg.cli_parser import _DEFAULT_ENV_ID, _PRESETS, build_parser
 
 __all__ = ["build_parser", "main"]
-
-# The choices of the options, spelled here so that --help needs no heavy import (tests/test_cli_errors.py checks
-# them against sb3_dtdpg.baselines, sb3_dtdpg.experiments.reproduce and noma_radiomap.registration).
-_ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
-_PRESETS = ("paper", "tuned")
-_OBSERVATIONS = ("goal", "destinations", "paper")
-_DEFAULT_ENV_ID = "NomaRadioMap-v0"
-_EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
-_PRESET_HELP = (
-    "hyperparameter set. tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; "
-    "the default); paper: Table I (the default of td3, sac and tqc, which have no tuned set)"
-)
-_OVERRIDES_HELP = (
-    "override single hyperparameters, RL Zoo style: key:value ... (e.g. learning_rate:3e-4 batch_size:256 "
-    "policy_kwargs:'dict(net_arch=[64, 64], activation_fn=nn.Tanh)'); values are Python literals or torch's module "
-    "and optimizer classes (nn.Tanh, th.optim.Adam)"
-)
-_MODES = ("noma", "oma")
-_OBSERVATION_HELP = (
-    "goal: each robot's position, destination, channel gain and arrived flag plus its direction and distance to "
-    "its destination (an extension, docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget; "
-    "the default everywhere); destinations: the same without direction and distance; paper: the paper's state, "
-    "Eq. (24), position and gain only (for the paper's task, fixed destinations)"
-)
-
-#: The default of ``--observation`` where the command takes ``--env``: what ``gymnasium.make(env id)`` gives.
-_ENV_OBSERVATION_NOTE = "default: the env id's, paper on NomaRadioMapPaper-v0 and NomaRadioMapPaperOMA-v0, else goal"
 
 
 @contextlib.contextmanager
@@ -515,7 +487,7 @@ def _run_reproduce(args: argparse.Namespace) -> None:
 def _run_options(args: argparse.Namespace) -> dict[str, Any]:
     """
     :return: the keyword arguments of ``run_compare`` and ``run_reproduce`` from the options both commands take
-        (``--budget``, ``--n-seeds`` and those of :func:`_add_common_run_options`)
+        (``--budget``, ``--n-seeds`` and those of :func:`sb3_dtdpg.cli_parser._add_common_run_options`)
     """
     return {
         "budget": args.budget,
@@ -697,363 +669,21 @@ def _cmd_enjoy(args: argparse.Namespace) -> int:
     return 0
 
 
-# ---------------------------------------------------------------------------------------------- argument types
-def _budget(value: str) -> str:
-    from sb3_dtdpg.experiments.budgets import BUDGET_ALIASES, BUDGETS, PUBLIC_BUDGETS
-
-    if value not in BUDGETS:
-        raise argparse.ArgumentTypeError(f"budget must be one of {', '.join(PUBLIC_BUDGETS)}, got {value!r}")
-    if value in BUDGET_ALIASES:
-        print(f"sb3-dtdpg: warning: --budget {value} is deprecated, use --budget {BUDGET_ALIASES[value]}", file=sys.stderr)
-        value = BUDGET_ALIASES[value]
-    return value
-
-
-_learning_rate = checked(float, lambda x: math.isfinite(x) and x > 0, "a positive finite learning rate")
-_threads = checked(int, lambda n: n >= 0, "0 (torch's default) or a positive number of threads")
-
-
-def _check_no_file_on_the_way(value: str, folder: Path) -> None:
-    """:raises argparse.ArgumentTypeError: a file stands where ``folder`` (of the option's ``value``) or a folder above
-    it would be, or the nearest folder that exists is not writable (an error before any work, not after it)"""
-    for part in (folder, *folder.parents):
-        if part.exists():
-            if not part.is_dir():
-                raise argparse.ArgumentTypeError(f"{value!r}: {str(part)!r} is a file, expected a folder")
-            if not os.access(part, os.W_OK | os.X_OK):
-                raise argparse.ArgumentTypeError(f"{value!r}: the folder {str(part)!r} is not writable")
-            return
-
-
-def _output_file(suffixes: tuple[str, ...]) -> Any:
-    def check(value: str) -> str:
-        if Path(value).suffix.lower() not in suffixes:
-            raise argparse.ArgumentTypeError(f"expected a {' or '.join(suffixes)} file, got {value!r}")
-        if Path(value).is_dir():
-            raise argparse.ArgumentTypeError(f"{value!r} is a folder, expected a file name")
-        _check_no_file_on_the_way(value, Path(value).parent)
-        return value
-
-    return check
-
-
-def _output_folder(value: str) -> str:
-    """An output folder: it may not exist yet, but no part of its path may be a file (nor may it be empty: the
-    current folder is written as ``.``)."""
-    if not value.strip():
-        raise argparse.ArgumentTypeError(f"expected a folder, got {value!r} (write . for the current folder)")
-    _check_no_file_on_the_way(value, Path(value))
-    return value
-
-
-def _scenario(value: str) -> str:
-    """
-    A built-in scenario name or a scenario YAML file, loaded (so validated) once while parsing.
-
-    The rule (:func:`noma_radiomap.load_scenario`): a bare built-in name (``small``) is the built-in scenario;
-    write a path (``./small``, ``small.yaml``) for a file. A note says so when a file of that bare name exists.
-    """
-    from noma_radiomap import list_scenarios, load_scenario
-
-    try:
-        load_scenario(value)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
-    if value in list_scenarios() and os.path.exists(value):
-        print(
-            f"sb3-dtdpg: note: --scenario {value} is the built-in scenario; for the file {value!r} here write ./{value}",
-            file=sys.stderr,
-        )
-    return value
-
-
-def _env_id(value: str) -> str:
-    """A registered Gymnasium env id (the NomaRadioMap ids are registered by importing ``noma_radiomap``)."""
-    import gymnasium as gym
-
-    import noma_radiomap  # noqa: F401
-
-    try:
-        gym.spec(value)
-    except gym.error.Error as error:
-        raise argparse.ArgumentTypeError(f"{value!r} is not a registered env id ({error})") from None
-    return value
-
-
-class _DeprecatedOption(argparse.Action):
-    """The old spelling of an option: stores its value like the new one and says which one to use."""
-
-    def __init__(self, option_strings: list[str], dest: str, replacement: str, **kwargs: Any) -> None:
-        super().__init__(option_strings, dest, **kwargs)
-        self.replacement = replacement
-
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option_string: Any = None):
-        print(f"{parser.prog}: warning: {option_string} is deprecated, use {self.replacement}", file=sys.stderr)
-        setattr(namespace, self.dest, values)
-
-
-class _HelpFormatter(argparse.HelpFormatter):
-    """argparse's formatter, with the budgets' details filled in when help is shown (not when the parser is built)."""
-
-    def _get_help_string(self, action: argparse.Action) -> str | None:
-        text = action.help
-        if text and "%(budgets)s" in text:
-            from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS
-
-            budgets = "; ".join(
-                f"{name}: {BUDGETS[name].episodes} episodes on {BUDGETS[name].scenario or 'mall'}, "
-                f"{BUDGETS[name].seeds} seed{'s' if BUDGETS[name].seeds != 1 else ''}"
-                + (
-                    " (the paper's scale, --budget paper: compare 15-30 min on 2 cores, reproduce longer; docs/RESULTS.md)"
-                    if name == "paper"
-                    else ""
-                )
-                for name in PUBLIC_BUDGETS
-            )
-            text = text.replace("%(budgets)s", budgets)
-        return text
-
-
-def _budget_help(default: str) -> str:
-    return f"experiment scale (default: {default}). %(budgets)s"
-
-
-def _add_seeds(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--n-seeds",
-        type=_seed_count,
-        default=None,
-        metavar="N",
-        help="seeds per configuration, 0..N-1 (default: the budget's)",
-    )
-    p.add_argument(
-        "--seeds", type=_seed_count, dest="n_seeds", action=_DeprecatedOption, replacement="--n-seeds", help=argparse.SUPPRESS
-    )
-
-
-def _add_hyperparameter_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP)
-    p.add_argument("--hyperparams", nargs="+", default=None, metavar="KEY:VALUE", help=_OVERRIDES_HELP)
-
-
-def _add_common_run_options(p: argparse.ArgumentParser, observation_default: str | None, observation_note: str) -> None:
-    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP)
-    p.add_argument(  # compare and reproduce take whole presets: their run identities name the preset
-        "--hyperparams",
-        choices=_PRESETS,
-        dest="preset",
-        action=_DeprecatedOption,
-        replacement="--preset",
-        help=argparse.SUPPRESS,
-    )
-    p.add_argument(
-        "--observation", choices=_OBSERVATIONS, default=observation_default, help=f"{_OBSERVATION_HELP} ({observation_note})"
-    )
-    p.add_argument("--workers", type=positive_int, default=None, help="parallel processes (default: number of CPUs)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars; a line per finished run instead")
-
-
-def _add_saved_model_options(p: argparse.ArgumentParser, seed_help: str) -> None:
-    p.add_argument("model", help="a model zip (train/compare: <out>/runs/<run id>/model.zip; the RL Zoo's; model.save's)")
-    p.add_argument(
-        "--algo", choices=_ALGORITHMS, default=None, help="the model's algorithm (default: from the run or the model file)"
-    )
-    p.add_argument("--env", type=_env_id, default=None, help=f"env id (default: the run's, else {_DEFAULT_ENV_ID})")
-    p.add_argument("--scenario", type=_scenario, default=None, help="scenario (default: the one the model was trained on)")
-    p.add_argument(
-        "--multiple-access", choices=_MODES, default=None, help="downlink mode (default: the one the model was trained on)"
-    )
-    p.add_argument(
-        "--observation", choices=_OBSERVATIONS, default=None, help="observation (default: the one the model was trained on)"
-    )
-    p.add_argument(
-        "--channel",
-        choices=("rayleigh", "radio_map"),
-        default="rayleigh",
-        help="test channel (default: rayleigh, the paper's random fading)",
-    )
-    p.add_argument("--seed", type=_seed, default=10_000, help=seed_help)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """:return: the argument parser of ``sb3-dtdpg`` (built without importing torch or Stable-Baselines3)"""
-    from sb3_dtdpg import __version__
-
-    parser = argparse.ArgumentParser(
-        prog="sb3-dtdpg",
-        description="DT-DPG on the NOMA indoor radio-map environment. --out is always an output folder.",
-        epilog="RL Zoo training (any zoo flag): python -m sb3_dtdpg.train --algo dtdpg --env NomaRadioMap-v0 (docs/ZOO.md)",
-        allow_abbrev=False,
-    )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    names = "map,train,compare,reproduce,evaluate,enjoy"
-    commands = parser.add_subparsers(
-        dest="command", required=True, metavar="{" + names + "}", help="sb3-dtdpg <command> -h: its options"
-    )
-
-    def command(name: str, help_text: str) -> argparse.ArgumentParser:
-        sub = commands.add_parser(
-            name, help=help_text, description=help_text, allow_abbrev=False, formatter_class=_HelpFormatter
-        )
-        sub.set_defaults(error=sub.error, prog=sub.prog)
-        return sub
-
-    p = command("map", "write the power and SINR maps of a scenario (paper Fig. 4)")
-    p.add_argument(
-        "--scenario",
-        type=_scenario,
-        default="mall",
-        help="built-in scenario name, or a YAML path (write ./name for a file named like a built-in) (default: mall)",
-    )
-    p.add_argument(
-        "--out",
-        type=_output_folder,
-        default="results/maps",
-        help="output folder; the figure is maps_<scenario>.png (default: results/maps)",
-    )
-    p.set_defaults(func=_cmd_map)
-
-    p = command("train", "one training run with TensorBoard logging, then a test evaluation")
-    p.add_argument("--algo", required=True, choices=_ALGORITHMS, help="the algorithm")
-    p.add_argument(
-        "--env",
-        type=_env_id,
-        default=_DEFAULT_ENV_ID,
-        help=f"any registered Gymnasium env id (default: {_DEFAULT_ENV_ID}); --scenario, --multiple-access and "
-        "--channel apply to the NomaRadioMap envs only",
-    )
-    p.add_argument("--scenario", type=_scenario, default=None, help="scenario name or YAML path (default: the env's, mall)")
-    budget = p.add_mutually_exclusive_group()
-    budget.add_argument("--episodes", type=positive_int, default=500, help="training episodes (default: 500, the paper's)")
-    budget.add_argument("--timesteps", type=positive_int, default=None, help="training timesteps instead of episodes")
-    p.add_argument("--seed", type=_seed, default=0, help=f"seed of the run, 0..{_MAX_SEED} (default: 0)")
-    p.add_argument("--multiple-access", choices=_MODES, default=None, help="NOMA or OMA downlink (default: the env id's)")
-    p.add_argument(
-        "--channel", choices=("radio_map", "rayleigh"), default=None, help="training channel (default: the env id's)"
-    )
-    p.add_argument("--learning-rate", type=_learning_rate, default=None, help="override the algorithm's learning rate")
-    _add_hyperparameter_options(p)
-    p.add_argument(
-        "--observation",
-        choices=_OBSERVATIONS,
-        default=None,
-        help=f"{_OBSERVATION_HELP} ({_ENV_OBSERVATION_NOTE})",
-    )
-    p.add_argument("--tb", type=_output_folder, default=None, help="TensorBoard log folder (default: <out>/tb)")
-    p.add_argument(
-        "--out",
-        type=_output_folder,
-        default="results/train",
-        help="output folder: on the NomaRadioMap envs <out>/runs/<run id>/ gets the model, checkpoints and result; "
-        "on other envs the model is <algo>_<env id>_s<seed>.zip (default: results/train)",
-    )
-    p.add_argument(
-        "--checkpoint-every",
-        type=positive_int,
-        default=10,
-        help="NomaRadioMap envs: save model and replay buffer every N episodes; the same command resumes from the "
-        "last one (default: 10)",
-    )
-    p.add_argument("--eval-episodes", type=positive_int, default=20, help="test episodes after training (default: 20)")
-    p.add_argument("--eval-seed", type=_seed, default=10_000, help="seed of the first test episode (default: 10000)")
-    p.add_argument(
-        "--threads",
-        type=_threads,
-        default=1,
-        help="torch threads (default: 1, fastest for these small networks; 0: torch's default)",
-    )
-    p.add_argument("--verbose", type=int, choices=(0, 1, 2), default=0, help="SB3 verbosity: 0, 1 or 2 (default: 0)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_train)
-
-    p = command("compare", "the main job: DT-DPG vs DDPG, NOMA and OMA, several seeds, table and figures")
-    p.add_argument("--budget", type=_budget, default="default", help=_budget_help("default"))
-    _add_seeds(p)
-    p.add_argument("--out", type=_output_folder, default="results/compare", help="output folder (default: results/compare)")
-    p.add_argument(
-        "--algos", nargs="+", choices=_ALGORITHMS, default=["dtdpg", "ddpg"], help="algorithms (default: dtdpg ddpg)"
-    )
-    p.add_argument(
-        "--multiple-access", nargs="+", choices=_MODES, default=list(_MODES), help="downlink mode(s) (default: noma oma)"
-    )
-    p.add_argument(
-        "--modes",
-        nargs="+",
-        choices=_MODES,
-        dest="multiple_access",
-        action=_DeprecatedOption,
-        replacement="--multiple-access",
-        help=argparse.SUPPRESS,
-    )
-    p.add_argument("--env", type=_env_id, default=_DEFAULT_ENV_ID, help=f"a NomaRadioMap env id (default: {_DEFAULT_ENV_ID})")
-    p.add_argument("--scenario", type=_scenario, default=None, help="scenario name or YAML path (default: the budget's)")
-    _add_common_run_options(p, None, _ENV_OBSERVATION_NOTE)
-    p.set_defaults(func=_cmd_compare)
-
-    p = command("reproduce", "every experiment of the paper's Section V; finished runs are not re-run")
-    p.add_argument(
-        "--budget",
-        type=_budget,
-        default="tiny",
-        help=_budget_help("tiny, the whole pipeline in minutes, too short to learn; smoke shows learning"),
-    )
-    _add_seeds(p)
-    p.add_argument(
-        "--out", type=_output_folder, default="results/reproduce", help="output folder (default: results/reproduce)"
-    )
-    p.add_argument("--report-only", action="store_true", help="only re-draw tables and figures from the finished runs")
-    p.add_argument(
-        "--experiments",
-        nargs="+",
-        choices=_EXPERIMENTS,
-        default=None,
-        help="train only the runs of these experiments (default: all but paper_task_reality; at the paper's scale about "
-        "45 minutes on 2 cores without the paper task, which takes about 5 hours more); the tables use every finished run",
-    )
-    p.add_argument(
-        "--multiple-access",
-        nargs="+",
-        choices=_MODES,
-        default=None,
-        help="train only the runs of these downlink modes (default: noma oma); the tables use every finished run",
-    )
-    _add_common_run_options(p, "goal", "default: goal; the paper_task experiment always runs on the paper's state")
-    p.set_defaults(func=_cmd_reproduce)
-
-    p = command("evaluate", "test a saved model on the test missions and print the table of compare")
-    _add_saved_model_options(p, "seed of the first test episode; episode i uses seed + i (default: 10000, as compare)")
-    p.add_argument("--n-episodes", type=positive_int, default=20, help="test episodes (default: 20, the paper's)")
-    p.add_argument("--json", type=_output_file((".json",)), default=None, help="also write summary and episodes as JSON")
-    p.add_argument("--csv", type=_output_file((".csv",)), default=None, help="also write one row per episode as CSV")
-    p.set_defaults(func=_cmd_evaluate)
-
-    p = command("enjoy", "run one mission of a saved model; --record writes it as an animation (no display needed)")
-    _add_saved_model_options(p, "seed of the mission (default: 10000, test episode 0 of evaluate and compare)")
-    p.add_argument(
-        "--record",
-        type=_output_file((".gif", ".mp4")),
-        default=None,
-        metavar="FILE",
-        help="write the mission as an animated .gif (or .mp4, needs ffmpeg): paths, power split, outage",
-    )
-    p.add_argument("--fps", type=positive_int, default=10, help="frames per second (default: 10; at most 50 for a .gif)")
-    p.add_argument(
-        "--max-frames",
-        type=positive_int,
-        default=120,
-        help="at most this many frames; long missions skip steps (default: 120)",
-    )
-    p.set_defaults(func=_cmd_enjoy)
-    return parser
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``sb3-dtdpg`` console script."""
     args, unknown = build_parser().parse_known_args(argv)
     if unknown:  # argparse reports these with the top-level usage; the subcommand's is the one that helps
         args.error(f"unrecognized arguments: {' '.join(unknown)}")
+    commands = {
+        "map": _cmd_map,
+        "train": _cmd_train,
+        "compare": _cmd_compare,
+        "reproduce": _cmd_reproduce,
+        "evaluate": _cmd_evaluate,
+        "enjoy": _cmd_enjoy,
+    }
     try:
-        return args.func(args)
+        return commands[args.command](args)
     except KeyboardInterrupt:
         if args.command in ("compare", "reproduce", "train"):  # jobs of runs, each written as it finishes
             print("interrupted: finished runs are saved; run the same command again to resume", file=sys.stderr)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sb3_dtdpg import cli
+from sb3_dtdpg import cli, cli_parser
 from sb3_dtdpg.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -274,9 +274,9 @@ def test_the_option_choices_are_the_libraries(monkeypatch):
     from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID, HYPERPARAMS
     from sb3_dtdpg.experiments.reproduce import EXPERIMENTS
 
-    assert cli._ALGORITHMS == ALGORITHMS and cli._OBSERVATIONS == OBSERVATIONS
-    assert set(cli._PRESETS) == set(HYPERPARAMS) and cli._DEFAULT_ENV_ID == DEFAULT_ENV_ID
-    assert cli._EXPERIMENTS == EXPERIMENTS
+    assert cli_parser._ALGORITHMS == ALGORITHMS and cli_parser._OBSERVATIONS == OBSERVATIONS
+    assert set(cli_parser._PRESETS) == set(HYPERPARAMS) and cli_parser._DEFAULT_ENV_ID == DEFAULT_ENV_ID
+    assert cli_parser._EXPERIMENTS == EXPERIMENTS
 
 
 def test_help_imports_neither_torch_nor_sb3():

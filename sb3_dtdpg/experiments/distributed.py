@@ -231,7 +231,7 @@ def _check_study_runs(study: Any, specs: list[RunSpec], study_name: str) -> None
 
 def build_parser() -> argparse.ArgumentParser:
     """:return: the worker's parser: per job, the options of ``sb3-dtdpg <job>`` that pick its runs, same defaults"""
-    from sb3_dtdpg import cli
+    from sb3_dtdpg import cli_parser
 
     parser = argparse.ArgumentParser(
         prog="python -m sb3_dtdpg.experiments.distributed", description=__doc__.splitlines()[0], allow_abbrev=False
@@ -246,48 +246,58 @@ def build_parser() -> argparse.ArgumentParser:
             allow_abbrev=False,
         )
         p.set_defaults(error=p.error)
-        p.add_argument("--budget", type=cli._budget, default=budget, help=f"budget name (default: {budget}, as for the CLI)")
-        cli._add_seeds(p)  # --n-seeds (and the deprecated --seeds)
+        p.add_argument(
+            "--budget", type=cli_parser._budget, default=budget, help=f"budget name (default: {budget}, as for the CLI)"
+        )
+        cli_parser._add_seeds(p)  # --n-seeds (and the deprecated --seeds)
         where = "" if job == "reproduce" else " where every algorithm has it, else paper"
         preset_help = f"hyperparameter set (default: tuned{where})"
-        p.add_argument("--preset", choices=cli._PRESETS, default="tuned" if job == "reproduce" else None, help=preset_help)
+        p.add_argument(
+            "--preset", choices=cli_parser._PRESETS, default="tuned" if job == "reproduce" else None, help=preset_help
+        )
         p.add_argument(
             "--hyperparams",
-            choices=cli._PRESETS,
+            choices=cli_parser._PRESETS,
             dest="preset",
-            action=cli._DeprecatedOption,
+            action=cli_parser._DeprecatedOption,
             replacement="--preset",
             help=argparse.SUPPRESS,
         )
         if job == "compare":
             p.add_argument(
-                "--algos", nargs="+", choices=cli._ALGORITHMS, default=None, help="algorithms (default: dtdpg ddpg)"
+                "--algos", nargs="+", choices=cli_parser._ALGORITHMS, default=None, help="algorithms (default: dtdpg ddpg)"
             )
             p.add_argument(
-                "--env", type=cli._env_id, default=None, help=f"a NomaRadioMap env id (default: {cli._DEFAULT_ENV_ID})"
+                "--env",
+                type=cli_parser._env_id,
+                default=None,
+                help=f"a NomaRadioMap env id (default: {cli_parser._DEFAULT_ENV_ID})",
             )
             p.add_argument(
-                "--scenario", type=cli._scenario, default=None, help="scenario name or YAML path (default: the budget's)"
+                "--scenario",
+                type=cli_parser._scenario,
+                default=None,
+                help="scenario name or YAML path (default: the budget's)",
             )
         observation = "goal" if job == "reproduce" else None
         p.add_argument(
             "--observation",
-            choices=cli._OBSERVATIONS,
+            choices=cli_parser._OBSERVATIONS,
             default=observation,
             help="observation (default: goal" + ("" if observation else "; paper for the paper task's env id") + ")",
         )
         p.add_argument(
-            "--multiple-access", nargs="+", choices=cli._MODES, default=None, help="downlink modes (default: noma oma)"
+            "--multiple-access", nargs="+", choices=cli_parser._MODES, default=None, help="downlink modes (default: noma oma)"
         )
         if job == "reproduce":
             p.add_argument(
                 "--experiments",
                 nargs="+",
-                choices=cli._EXPERIMENTS,
+                choices=cli_parser._EXPERIMENTS,
                 default=None,
                 help="the runs of these experiments (default: all but paper_task_reality, as for the CLI)",
             )
-        p.add_argument("--out", type=cli._output_folder, required=True, help="the output folder shared by the workers")
+        p.add_argument("--out", type=cli_parser._output_folder, required=True, help="the output folder shared by the workers")
         p.add_argument("--storage", required=True, help="Optuna storage URL, or a .log path (JournalFile)")
         p.add_argument("--study-name", required=True)
     return parser
