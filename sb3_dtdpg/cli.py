@@ -669,12 +669,9 @@ def _cmd_enjoy(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``sb3-dtdpg`` console script."""
-    args, unknown = build_parser().parse_known_args(argv)
-    if unknown:  # argparse reports these with the top-level usage; the subcommand's is the one that helps
-        args.error(f"unrecognized arguments: {' '.join(unknown)}")
-    commands = {
+def _commands() -> dict[str, Callable[[argparse.Namespace], int]]:
+    """:return: the function of each subcommand of :func:`build_parser`, by name"""
+    return {
         "map": _cmd_map,
         "train": _cmd_train,
         "compare": _cmd_compare,
@@ -682,8 +679,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         "evaluate": _cmd_evaluate,
         "enjoy": _cmd_enjoy,
     }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``sb3-dtdpg`` console script."""
+    args, unknown = build_parser().parse_known_args(argv)
+    if unknown:  # argparse reports these with the top-level usage; the subcommand's is the one that helps
+        args.error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
-        return commands[args.command](args)
+        return _commands()[args.command](args)
     except KeyboardInterrupt:
         if args.command in ("compare", "reproduce", "train"):  # jobs of runs, each written as it finishes
             print("interrupted: finished runs are saved; run the same command again to resume", file=sys.stderr)

@@ -1,5 +1,6 @@
 """User errors of the command line: one ``error:`` line of the subcommand, exit status 2, nothing created."""
 
+import argparse
 import os
 import re
 import subprocess
@@ -277,6 +278,11 @@ def test_the_option_choices_are_the_libraries(monkeypatch):
     assert cli_parser._ALGORITHMS == ALGORITHMS and cli_parser._OBSERVATIONS == OBSERVATIONS
     assert set(cli_parser._PRESETS) == set(HYPERPARAMS) and cli_parser._DEFAULT_ENV_ID == DEFAULT_ENV_ID
     assert cli_parser._EXPERIMENTS == EXPERIMENTS
+
+
+def test_every_subcommand_of_the_parser_has_its_command():
+    subcommands = next(a for a in cli_parser.build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(cli._commands()) == set(subcommands.choices)  # else: a KeyError traceback for the one left out
 
 
 def test_help_imports_neither_torch_nor_sb3():

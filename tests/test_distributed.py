@@ -180,7 +180,10 @@ def test_the_worker_says_what_is_left_and_ends_an_interruption_in_one_line(tmp_p
     with pytest.raises(SystemExit) as exit_info:
         distributed.main(["compare", *options])
     assert exit_info.value.code == 130
-    assert capsys.readouterr().err.strip() == "interrupted: the run in training starts afresh when a worker takes it again"
+    assert capsys.readouterr().err.strip() == (
+        "interrupted: when a worker takes the run again, it trains afresh (or is only tested again if it was in its test "
+        "episodes)"
+    )
 
 
 def test_a_stored_run_of_other_settings_is_refused_before_anything_trains(tmp_path, capsys):

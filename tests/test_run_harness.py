@@ -519,6 +519,82 @@ def test_a_compare_run_retrains_leftovers_that_are_not_its_uninterrupted_trainin
     assert not (run_dir / "trained.json").exists()
 
 
+DTDPG_SPEC = RunSpec("dtdpg", "noma", 0, 12, scenario="small", eval_episodes=1, hyperparams="paper", observation="paper")
+
+
+def _dtdpg_interrupted_before_transfer_test(monkeypatch, out):
+    """Train ``DTDPG_SPEC`` as a ``compare`` worker does; interrupt it in its second test, the network before the transfer."""
+    from sb3_dtdpg import evaluation
+    from sb3_dtdpg.experiments import runs
+
+    evaluate, calls = evaluation.evaluate, []
+
+    def interrupted_second(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return evaluate(*args, **kwargs)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(evaluation, "evaluate", interrupted_second)
+        with pytest.raises(KeyboardInterrupt):
+            runs._worker(DTDPG_SPEC, str(out), prepare_run(DTDPG_SPEC))
+    run_dir = out / "runs" / DTDPG_SPEC.run_id
+    assert len(calls) == 2 and list(run_dir.glob("phase_*_destination.zip"))  # it had a network before the transfer
+    return run_dir
+
+
+def _without_timings(result: dict) -> str:
+    train = {k: v for k, v in result["train"].items() if k not in ("wall_s", "steps_per_s")}
+    return json.dumps({**result, "train": train}, sort_keys=True)
+
+
+def test_a_dtdpg_run_interrupted_in_its_test_before_the_transfer_gives_the_uninterrupted_result(tmp_path, monkeypatch):
+    from sb3_dtdpg.experiments import runs
+
+    _dtdpg_interrupted_before_transfer_test(monkeypatch, tmp_path / "a")
+    with monkeypatch.context() as patch:
+        patch.setattr(runs, "_train", lambda *args, **kwargs: pytest.fail("trained again"))
+        runs._worker(DTDPG_SPEC, str(tmp_path / "a"), prepare_run(DTDPG_SPEC))
+    retested = json.loads(result_path(tmp_path / "a", DTDPG_SPEC).read_text())
+    uninterrupted = run_one(DTDPG_SPEC, tmp_path / "b")
+    assert "before_transfer" in retested and _without_timings(retested) == _without_timings(uninterrupted)
+
+
+@pytest.mark.parametrize("damage", ["removed", "not a zip"])
+def test_a_dtdpg_run_whose_network_before_the_transfer_is_gone_is_trained_again(tmp_path, monkeypatch, damage):
+    """The uninterrupted run evaluates that network too: without it, retesting would give another result (or fail
+    on every rerun)."""
+    from sb3_dtdpg.experiments import runs
+
+    run_dir = _dtdpg_interrupted_before_transfer_test(monkeypatch, tmp_path)
+    before = next(run_dir.glob("phase_*_destination.zip"))
+    if damage == "removed":
+        before.unlink()
+    else:
+        before.write_bytes(b"not a zip")
+
+    class TrainedAgain(Exception):
+        pass
+
+    def train(*args, **kwargs):
+        raise TrainedAgain
+
+    monkeypatch.setattr(runs, "_train", train)
+    with pytest.raises(TrainedAgain):
+        runs._worker(DTDPG_SPEC, str(tmp_path), prepare_run(DTDPG_SPEC))
+
+
+def test_a_retested_run_leaves_no_temporary_file_of_a_killed_write(tmp_path, monkeypatch):
+    run_dir = _interrupted_in_its_evaluations(monkeypatch, tmp_path)
+    left = run_dir / ".result.json.abc123.tmp"  # what atomic_write leaves when its process is killed
+    left.write_text("{")
+    from sb3_dtdpg.experiments import runs
+
+    runs._worker(SPEC, str(tmp_path), prepare_run(SPEC))
+    assert result_path(tmp_path, SPEC).exists() and not left.exists()
+
+
 def test_a_distributed_run_interrupted_in_its_evaluations_is_evaluated_again(tmp_path, monkeypatch):
     pytest.importorskip("optuna")
     from sb3_dtdpg.experiments import runs

@@ -208,6 +208,8 @@ def test_a_run_spec_is_the_same_run_whatever_the_order_of_its_overrides():
         ((("gamma", "0.9"), ("gamma", "0.8")), "each hyperparameter once"),
         ((("gamma", 0.9),), "pairs of strings"),
         (("gamma",), "pairs of strings"),
+        (None, "pairs of strings"),
+        ((pair for pair in [("gamma", "0.9")]), "pairs of strings"),  # was: a generator read once, no overrides left
     ],
 )
 def test_a_run_spec_refuses_overrides_that_are_not_one_pair_per_hyperparameter(overrides, message):

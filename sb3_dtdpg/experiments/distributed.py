@@ -126,8 +126,9 @@ def run_study_worker(
     :param storage: an Optuna storage or its URL (a ``.log`` path: a ``JournalFileStorage``)
     :param study_name: the study shared by the workers of one job
     :param n_runs: stop after training this many runs (None: until no run is left to take)
-    :param run: the function that runs one spec (default: :func:`run_one`, which evaluates a run interrupted in its
-        evaluations again instead of training it again; tests pass a cheap one)
+    :param run: the function that runs one spec, ``run(spec, out)`` (default: :func:`run_one` with ``retest=True``,
+        which evaluates a run interrupted in its evaluations again instead of training it again; a function given
+        here decides that itself; tests pass a cheap one)
     :return: the run ids this worker trained
     :raises OutputBusyError: a ``compare`` / ``reproduce`` job holds the folder
     :raises RunMismatchError: stored results in the folder are other runs' (checked for every run first, as
@@ -334,7 +335,11 @@ def main(argv: list[str] | None = None) -> None:
     except (RunMismatchError, RunDivergedError, DamagedRecordError, OutputBusyError, StudyError) as error:  # one line
         args.error(str(error))
     except KeyboardInterrupt:
-        print("interrupted: the run in training starts afresh when a worker takes it again", file=sys.stderr)
+        print(
+            "interrupted: when a worker takes the run again, it trains afresh (or is only tested again if it was in "
+            "its test episodes)",
+            file=sys.stderr,
+        )
         raise SystemExit(130) from None
     left = sum(not result_path(args.out, spec).exists() for spec in specs)
     print(

@@ -24,6 +24,7 @@ import json
 import os
 import shutil
 import time
+import zipfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -277,6 +278,11 @@ def _record_divergence(out: Path, spec: RunSpec, identity: dict[str, Any], model
     raise error
 
 
+def _before_transfer_models(run_dir: Path) -> list[Path]:
+    """:return: DT-DPG's networks saved at the end of its destination phase (the "before transfer" evaluation's)"""
+    return sorted(run_dir.glob("phase_*_destination.zip"))
+
+
 def _evaluations(
     spec: RunSpec, model: Any, run_dir: Path, trained_on: list[str], final_reward_phase: str, n_trajectories: int
 ) -> dict[str, Any]:
@@ -297,7 +303,7 @@ def _evaluations(
         )
 
     records = {"eval": _evaluation_record(_evaluate(model, final_reward_phase), n_trajectories, final_reward_phase)}
-    before = sorted(run_dir.glob("phase_*_destination.zip"))
+    before = _before_transfer_models(run_dir)
     if before and spec.eval_before_transfer:
         load_env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
         phase_1 = load_model(spec.algo, before[0], env=load_env, device="cpu")
@@ -387,6 +393,7 @@ def run_one(
     elif retest:
         trained = _uninterrupted_training(run_dir, identity, spec, verbose)
         if trained is not None:
+            remove_temp_files(run_dir)  # e.g. of a result.json whose writer was killed
             return _record_result(spec, out, *trained, n_trajectories)
     tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
     with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):
@@ -445,6 +452,7 @@ def _train_and_record(
         },
         "reward_phases": {"trained": trained_on, "evaluated": final_reward_phase},
         "curriculum_state": curriculum,
+        "before_transfer_models": [path.name for path in _before_transfer_models(run_dir)],
     }
     # What the result keeps of the training, so that a run interrupted in its evaluations resumes with them
     write_json(run_dir / TRAINED_RECORD, trained, indent=1)
@@ -457,12 +465,18 @@ def _uninterrupted_training(
     """
     :return: the trained model and its record of a run that trained from its start in one go and was interrupted
         in its evaluations (None: none, or leftovers that are not such a run's, to be removed as without ``resume``:
-        another run's, damaged, or of a training resumed from a checkpoint)
+        another run's, damaged, of a training resumed from a checkpoint, or without the networks saved before the
+        transfer that its training left, which the uninterrupted run evaluates too)
     """
     try:
         trained = read_trained(run_dir, identity)
         train = None if trained is None else trained.get("train")
         if not isinstance(train, dict) or train.get("resumed_at_episode") is not None:
+            return None
+        before = trained.get("before_transfer_models")  # recorded when the training ended
+        if before != [path.name for path in _before_transfer_models(run_dir)]:
+            return None
+        if not all(zipfile.is_zipfile(run_dir / name) for name in before):
             return None
         return _load_trained(spec, run_dir, verbose), trained
     except (RunMismatchError, DamagedRecordError):

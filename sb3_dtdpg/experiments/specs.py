@@ -122,13 +122,15 @@ class RunSpec:
         for name in ("channel", "eval_channel"):
             if getattr(self, name) not in _CHANNELS:
                 raise ValueError(f"RunSpec.{name}: expected one of {_CHANNELS}, got {getattr(self, name)!r}")
-        names = [pair[0] if isinstance(pair, tuple) and len(pair) == 2 else None for pair in self.overrides]
-        if not all(isinstance(name, str) for name in names) or not all(isinstance(p[1], str) for p in self.overrides):
+        pairs = tuple(self.overrides) if isinstance(self.overrides, (tuple, list)) else None
+        if pairs is None or not all(
+            isinstance(pair, tuple) and len(pair) == 2 and all(isinstance(text, str) for text in pair) for pair in pairs
+        ):
             raise ValueError(f"RunSpec.overrides: expected (name, Python literal) pairs of strings, got {self.overrides!r}")
-        if len(set(names)) != len(names):
+        if len({name for name, _ in pairs}) != len(pairs):
             raise ValueError(f"RunSpec.overrides: each hyperparameter once, got {self.overrides!r}")
         # in name order, so that the run id and identity do not depend on the order they were given in
-        object.__setattr__(self, "overrides", tuple(sorted(self.overrides)))
+        object.__setattr__(self, "overrides", tuple(sorted(pairs)))
         if not isinstance(self.tag, str) or (self.tag and safe_name(self.tag) != self.tag):
             raise ValueError(f"RunSpec.tag: expected letters, digits and ._+- (part of a folder name), got {self.tag!r}")
 
