@@ -461,6 +461,22 @@ def test_a_run_interrupted_in_its_evaluations_is_evaluated_again_not_trained_aga
     }
 
 
+class _TrainedAgain(Exception):
+    pass
+
+
+def _assert_trained_again(monkeypatch, spec, out):
+    """A ``compare`` worker given ``spec`` trains it (rather than testing what the folder holds)."""
+    from sb3_dtdpg.experiments import runs
+
+    def train(*args, **kwargs):
+        raise _TrainedAgain
+
+    monkeypatch.setattr(runs, "_train", train)
+    with pytest.raises(_TrainedAgain):
+        runs._worker(spec, str(out), prepare_run(spec))
+
+
 def _interrupted_in_its_evaluations(monkeypatch, out):
     """Train ``SPEC`` into ``out`` as a ``compare`` worker does, and interrupt it in its test episodes."""
     from sb3_dtdpg.experiments import runs
@@ -495,7 +511,6 @@ def test_a_compare_run_retrains_leftovers_that_are_not_its_uninterrupted_trainin
     """Only a training that ran from its start in one go is this run's as compare would train it: a record of a
     training resumed from a checkpoint (``sb3-dtdpg train``), of another identity, or beside a damaged model is a
     leftover, trained again (not an error, not tested as this run)."""
-    from sb3_dtdpg.experiments import runs
 
     run_dir = _interrupted_in_its_evaluations(monkeypatch, tmp_path)
     record = json.loads((run_dir / "trained.json").read_text())
@@ -507,15 +522,7 @@ def test_a_compare_run_retrains_leftovers_that_are_not_its_uninterrupted_trainin
         (run_dir / "model.zip").write_bytes(b"not a zip")
     (run_dir / "trained.json").write_text(json.dumps(record))
 
-    class TrainedAgain(Exception):
-        pass
-
-    def train(*args, **kwargs):
-        raise TrainedAgain
-
-    monkeypatch.setattr(runs, "_train", train)
-    with pytest.raises(TrainedAgain):
-        runs._worker(SPEC, str(tmp_path), prepare_run(SPEC))
+    _assert_trained_again(monkeypatch, SPEC, tmp_path)
     assert not (run_dir / "trained.json").exists()
 
 
@@ -565,7 +572,6 @@ def test_a_dtdpg_run_interrupted_in_its_test_before_the_transfer_gives_the_unint
 def test_a_dtdpg_run_whose_network_before_the_transfer_is_gone_is_trained_again(tmp_path, monkeypatch, damage):
     """The uninterrupted run evaluates that network too: without it, retesting would give another result (or fail
     on every rerun)."""
-    from sb3_dtdpg.experiments import runs
 
     run_dir = _dtdpg_interrupted_before_transfer_test(monkeypatch, tmp_path)
     before = next(run_dir.glob("phase_*_destination.zip"))
@@ -574,15 +580,7 @@ def test_a_dtdpg_run_whose_network_before_the_transfer_is_gone_is_trained_again(
     else:
         before.write_bytes(b"not a zip")
 
-    class TrainedAgain(Exception):
-        pass
-
-    def train(*args, **kwargs):
-        raise TrainedAgain
-
-    monkeypatch.setattr(runs, "_train", train)
-    with pytest.raises(TrainedAgain):
-        runs._worker(DTDPG_SPEC, str(tmp_path), prepare_run(DTDPG_SPEC))
+    _assert_trained_again(monkeypatch, DTDPG_SPEC, tmp_path)
 
 
 def test_a_retested_run_leaves_no_temporary_file_of_a_killed_write(tmp_path, monkeypatch):
