@@ -583,6 +583,28 @@ def test_a_dtdpg_run_whose_network_before_the_transfer_is_gone_is_trained_again(
     _assert_trained_again(monkeypatch, DTDPG_SPEC, tmp_path)
 
 
+@pytest.mark.parametrize("job", ["train", "compare"])
+def test_a_damaged_network_before_the_transfer_is_a_named_error_when_the_run_is_tested_again(tmp_path, monkeypatch, job):
+    """``train`` resumes whatever its folder holds, ``compare`` takes any zip there: a model that cannot be loaded
+    from it names the file and what to delete (was: SB3's ValueError, the same on every rerun)."""
+    import zipfile
+
+    from sb3_dtdpg.experiments import runs
+
+    run_dir = _dtdpg_interrupted_before_transfer_test(monkeypatch, tmp_path)
+    before = next(run_dir.glob("phase_*_destination.zip"))
+    with zipfile.ZipFile(before, "w") as damaged:  # a zip, not a model
+        damaged.writestr("data", "{")
+    trained = run_dir / "trained.json"
+    with pytest.raises(
+        DamagedRecordError, match=rf"{re.escape(str(before))}, cannot be loaded .*delete {re.escape(str(trained))}"
+    ):
+        if job == "train":
+            run_one(DTDPG_SPEC, tmp_path, resume=True)
+        else:
+            runs._worker(DTDPG_SPEC, str(tmp_path), prepare_run(DTDPG_SPEC))
+
+
 def test_a_retested_run_leaves_no_temporary_file_of_a_killed_write(tmp_path, monkeypatch):
     run_dir = _interrupted_in_its_evaluations(monkeypatch, tmp_path)
     left = run_dir / ".result.json.abc123.tmp"  # what atomic_write leaves when its process is killed

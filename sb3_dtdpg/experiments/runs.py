@@ -306,7 +306,14 @@ def _evaluations(
     before = _before_transfer_models(run_dir)
     if before and spec.eval_before_transfer:
         load_env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
-        phase_1 = load_model(spec.algo, before[0], env=load_env, device="cpu")
+        try:
+            phase_1 = load_model(spec.algo, before[0], env=load_env, device="cpu")
+        except Exception as error:  # written atomically: damaged from outside
+            load_env.close()
+            raise DamagedRecordError(
+                f"the network saved before the transfer, {before[0]}, cannot be loaded ({type(error).__name__}: "
+                f"{str(error)[:200]}); delete {run_dir / TRAINED_RECORD} to train the run again"
+            ) from error
         phase_1_reward = trained_on[0]
         records["before_transfer"] = _evaluation_record(_evaluate(phase_1, phase_1_reward), n_trajectories, phase_1_reward)
         load_env.close()
