@@ -107,6 +107,11 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "vec8_gs2_lr3e3": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 2, "learning_rate": 3e-3}},
     "vec8_gs3_lr2e3": {"n_envs": 8, "kwargs": {"train_freq": 1, "gradient_steps": 3, "learning_rate": 2e-3}},
     "vec12_gs3_lr2e3": {"n_envs": 12, "kwargs": {"train_freq": 1, "gradient_steps": 3, "learning_rate": 2e-3}},
+    "vec8_gs2_lr2e3_tau0.01": {
+        "n_envs": 8,
+        "kwargs": {"train_freq": 1, "gradient_steps": 2, "learning_rate": 2e-3, "tau": 0.01},
+    },
+    "vec6_gs2_lr2e3": {"n_envs": 6, "kwargs": {"train_freq": 1, "gradient_steps": 2, "learning_rate": 2e-3}},
 }
 #: The same ablations with the goal-conditioned observation: ``goal_<name>``.
 CONFIGS.update(
