@@ -477,18 +477,30 @@ def _assert_trained_again(monkeypatch, spec, out):
         runs._worker(spec, str(out), prepare_run(spec))
 
 
-def _interrupted_in_its_evaluations(monkeypatch, out):
-    """Train ``SPEC`` into ``out`` as a ``compare`` worker does, and interrupt it in its test episodes."""
+def _interrupted_in_its_evaluations(monkeypatch, out, spec=SPEC, test=1):
+    """
+    Train ``spec`` into ``out`` as a ``compare`` worker does, and interrupt it in its test episodes.
+
+    :param test: the evaluation interrupted (DT-DPG's second tests its network before the transfer)
+    :return: the run's folder
+    """
+    from sb3_dtdpg import evaluation
     from sb3_dtdpg.experiments import runs
 
+    evaluate, calls = evaluation.evaluate, []
+
     def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
+        calls.append(1)
+        if len(calls) == test:
+            raise KeyboardInterrupt
+        return evaluate(*args, **kwargs)
 
     with monkeypatch.context() as patch:
-        patch.setattr(runs, "_evaluations", interrupted)
+        patch.setattr(evaluation, "evaluate", interrupted)
         with pytest.raises(KeyboardInterrupt):
-            runs._worker(SPEC, str(out), prepare_run(SPEC))
-    return out / "runs" / SPEC.run_id
+            runs._worker(spec, str(out), prepare_run(spec))
+    assert len(calls) == test
+    return out / "runs" / spec.run_id
 
 
 def test_a_compare_run_interrupted_in_its_evaluations_is_evaluated_again_not_trained_again(tmp_path, monkeypatch):
@@ -531,23 +543,8 @@ DTDPG_SPEC = RunSpec("dtdpg", "noma", 0, 12, scenario="small", eval_episodes=1, 
 
 def _dtdpg_interrupted_before_transfer_test(monkeypatch, out):
     """Train ``DTDPG_SPEC`` as a ``compare`` worker does; interrupt it in its second test, the network before the transfer."""
-    from sb3_dtdpg import evaluation
-    from sb3_dtdpg.experiments import runs
-
-    evaluate, calls = evaluation.evaluate, []
-
-    def interrupted_second(*args, **kwargs):
-        calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return evaluate(*args, **kwargs)
-
-    with monkeypatch.context() as patch:
-        patch.setattr(evaluation, "evaluate", interrupted_second)
-        with pytest.raises(KeyboardInterrupt):
-            runs._worker(DTDPG_SPEC, str(out), prepare_run(DTDPG_SPEC))
-    run_dir = out / "runs" / DTDPG_SPEC.run_id
-    assert len(calls) == 2 and list(run_dir.glob("phase_*_destination.zip"))  # it had a network before the transfer
+    run_dir = _interrupted_in_its_evaluations(monkeypatch, out, DTDPG_SPEC, test=2)
+    assert list(run_dir.glob("phase_*_destination.zip"))  # it had a network before the transfer
     return run_dir
 
 
@@ -605,13 +602,17 @@ def test_a_damaged_network_before_the_transfer_is_a_named_error_when_the_run_is_
             runs._worker(DTDPG_SPEC, str(tmp_path), prepare_run(DTDPG_SPEC))
 
 
-def test_a_retested_run_leaves_no_temporary_file_of_a_killed_write(tmp_path, monkeypatch):
+@pytest.mark.parametrize("job", ["train", "compare"])
+def test_a_retested_run_leaves_no_temporary_file_of_a_killed_write(tmp_path, monkeypatch, job):
+    from sb3_dtdpg.experiments import runs
+
     run_dir = _interrupted_in_its_evaluations(monkeypatch, tmp_path)
     left = run_dir / ".result.json.abc123.tmp"  # what atomic_write leaves when its process is killed
     left.write_text("{")
-    from sb3_dtdpg.experiments import runs
-
-    runs._worker(SPEC, str(tmp_path), prepare_run(SPEC))
+    if job == "train":  # was: left behind by a resumed train
+        run_one(SPEC, tmp_path, resume=True)
+    else:
+        runs._worker(SPEC, str(tmp_path), prepare_run(SPEC))
     assert result_path(tmp_path, SPEC).exists() and not left.exists()
 
 

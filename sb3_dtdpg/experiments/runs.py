@@ -388,20 +388,21 @@ def run_one(
         th.set_num_threads(threads)  # one core per run: runs are parallel across processes
     out = Path(out)
     run_dir = run_folder(out, spec)
-    checkpoint = None
+    checkpoint, trained = None, None
     if resume:
         finished = load_result(out, spec, identity)
         if finished is not None:
             return finished
-        trained = read_trained(run_dir, identity)
-        if trained is not None:  # interrupted in its evaluations: the trained model is evaluated, not trained again
-            return _record_result(spec, out, _load_trained(spec, run_dir, verbose), trained, n_trajectories)
-        checkpoint = read_checkpoint(run_dir, identity)
+        record = read_trained(run_dir, identity)
+        if record is not None:
+            trained = _load_trained(spec, run_dir, verbose), record
+        else:
+            checkpoint = read_checkpoint(run_dir, identity)
     elif retest:
         trained = _uninterrupted_training(run_dir, identity, spec, verbose)
-        if trained is not None:
-            remove_temp_files(run_dir)  # e.g. of a result.json whose writer was killed
-            return _record_result(spec, out, *trained, n_trajectories)
+    if trained is not None:  # interrupted in its evaluations: the trained model is evaluated, not trained again
+        remove_temp_files(run_dir)  # e.g. of a result.json whose writer was killed
+        return _record_result(spec, out, *trained, n_trajectories)
     tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
     with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):
         if checkpoint is None:  # leftovers of an interrupted attempt: start afresh
