@@ -359,3 +359,58 @@ def test_module_hooks_run_the_networks_as_modules() -> None:
     assert not networks.hooked()
     model.learn(5, reset_num_timesteps=False)
     assert len(batches) == 5 * 2
+
+
+@pytest.mark.parametrize("training", [True, False])
+def test_written_out_critic_input_norm_is_the_modules_bit_for_bit(training: bool) -> None:
+    """The critic's input batch norm, written out on the whole input, against :class:`StateActionBatchNorm`: the same
+    output bits and running statistics, also for the inputs where float signs matter (``-0.0`` on a zero mean, an
+    input equal to the mean)."""
+    from sb3_dtdpg.dtdpg.backprop import MlpCritic
+
+    model = _small_model(learning_starts=10, batch_size=8, seed=0)
+    module = model.critic.q_networks[0][0]
+    generator = th.Generator().manual_seed(0)
+    for case in range(20):
+        written_out = MlpCritic(model.critic)
+        state_action = th.randn(32, module.features_dim + module.action_dim, generator=generator) * (case + 1)
+        for norm in (module.state_norm, module.action_norm):
+            norm.running_mean.copy_(th.randn(norm.num_features, generator=generator))
+            norm.running_var.copy_(th.rand(norm.num_features, generator=generator) ** 3)
+        if case % 2 == 0:
+            for norm in (module.state_norm, module.action_norm):
+                norm.running_mean.zero_()
+            state_action[0] = -0.0
+        state_action[1] = th.cat([module.state_norm.running_mean, module.action_norm.running_mean])
+        statistics = [t.clone() for t in module.buffers()]
+        module.train(training)
+        with th.no_grad():
+            expected = module(state_action)
+        expected_statistics = [t.clone() for t in module.buffers()]
+        for buffer, value in zip(module.buffers(), statistics, strict=True):
+            buffer.copy_(value)
+        output = written_out._normalize(state_action, None)
+        assert th.equal(output.view(th.int32), expected.view(th.int32)), case
+        for buffer, value in zip(module.buffers(), expected_statistics, strict=True):
+            assert th.equal(buffer, value), case
+
+
+def test_adam_step_counts_are_views_of_one_tensor(tmp_path: Path) -> None:
+    """The fused Adam step counts each optimizer's steps in one tensor whose views are the optimizer's ``step``
+    entries: they count every update, also after the model is saved, loaded and trained on."""
+    model = _small_model(learning_starts=10, batch_size=8, seed=0)
+    model.learn(30)
+
+    def step_counts(model) -> list[th.Tensor]:
+        return [state["step"] for state in model.critic.optimizer.state.values()]
+
+    counts = step_counts(model)
+    assert len({c.untyped_storage().data_ptr() for c in counts}) == 1
+    assert all(c.item() == model._n_updates > 0 for c in counts)
+    model.save(tmp_path / "model")
+    loaded = DTDPG.load(tmp_path / "model", env=_point_env())
+    assert all(c.item() == model._n_updates for c in step_counts(loaded))
+    loaded.learn(10, reset_num_timesteps=False)
+    counts = step_counts(loaded)
+    assert len({c.untyped_storage().data_ptr() for c in counts}) == 1
+    assert all(c.item() == loaded._n_updates == model._n_updates + 10 for c in counts)

@@ -7,9 +7,10 @@ units that bookkeeping costs more than the matrix products. Here the forward pas
 backward pass is the chain of the ATen kernels autograd itself would call, on tensors of the same shapes and
 layouts: ``addmm`` (``nn.Linear``) backward is ``grad.mm(W)``, ``grad.t().mm(x)`` and ``grad.sum(0)``, ReLU backward
 is ``threshold_backward`` on the layer's output, ``tanh`` backward is ``tanh_backward``, batch norm is
-``native_batch_norm`` and ``native_batch_norm_backward``, the losses are ``mse_loss_backward`` and the mean's
-``-1 / n``. So every number is the one autograd gives, bit for bit (``tests/test_lean_step.py`` compares the two
-over whole training runs).
+``native_batch_norm`` and ``native_batch_norm_backward`` (the critic's input batch norm, which normalises with its
+running statistics, is that kernel's formula written out, on the whole input at once), the losses are
+``mse_loss_backward`` and the mean's ``-1 / n``. So every number is the one autograd gives, bit for bit
+(``tests/test_lean_step.py`` compares the two over whole training runs).
 
 :meth:`BackpropNetworks.of` recognises the networks it can run; anything else trains on the autograd path of
 :mod:`sb3_dtdpg.dtdpg.lean`.
@@ -39,6 +40,8 @@ _GLOBAL_HOOKS = (
 )
 #: ``reduction`` of ``mse_loss`` and ``mse_loss_backward``: the mean
 _MEAN = 1
+#: The batch statistics batch norm keeps when it normalises with its running statistics: none
+_NO_STATISTICS = th.empty(0)
 
 
 @dataclass
@@ -207,7 +210,11 @@ class MlpCritic:
             and self.stack.supported
             and (
                 norm is None
-                or (_plain_batch_norm(norm.state_norm, affine=False) and _plain_batch_norm(norm.action_norm, affine=False))
+                or (
+                    _plain_batch_norm(norm.state_norm, affine=False)
+                    and _plain_batch_norm(norm.action_norm, affine=False)
+                    and norm.state_norm.eps == norm.action_norm.eps
+                )
             )
             and type(critic.features_extractor) is FlattenExtractor
         )
@@ -215,22 +222,27 @@ class MlpCritic:
         self.params: list[th.Tensor] = self.stack.params
 
     def _normalize(self, state_action: th.Tensor, trace: _Trace | None) -> th.Tensor:
-        """:class:`StateActionBatchNorm` on the concatenated input; the trace keeps the action part's batch norm"""
+        """
+        :class:`StateActionBatchNorm` on the concatenated input, in one pass over it: the running statistics of both
+        parts are updated (training mode) as the module updates them, then each column is normalised as batch norm's
+        kernel normalises a column of a non-contiguous input (the module's parts are column slices) with running
+        statistics, ``((x - mean) * invstd) * 1 + 0`` with ``invstd = 1 / sqrt(var + eps)``, the same float32
+        operations on the same numbers. The trace keeps the action part for its backward pass.
+        """
         norm = self.input_norm
         assert norm is not None
+        state_norm, action_norm = norm.state_norm, norm.action_norm
         state, action = state_action.split([norm.features_dim, norm.action_dim], dim=1)
-        parts = []
-        for batch_norm, x in ((norm.state_norm, state), (norm.action_norm, action)):
+        for batch_norm, x in ((state_norm, state), (action_norm, action)):
             if batch_norm.training:
                 th.batch_norm_update_stats(x, batch_norm.running_mean, batch_norm.running_var, batch_norm.momentum)
                 batch_norm.num_batches_tracked.add_(1)
-            out, save_mean, save_invstd = _aten.native_batch_norm(
-                x, None, None, batch_norm.running_mean, batch_norm.running_var, False, batch_norm.momentum, batch_norm.eps
-            )
-            parts.append(out)
         if trace is not None:
-            trace.pre_norm, trace.save_mean, trace.save_invstd = action, save_mean, save_invstd
-        return th.cat(parts, dim=1)
+            # batch norm with running statistics keeps no batch statistics: its backward pass gets empty ones
+            trace.pre_norm, trace.save_mean, trace.save_invstd = action, _NO_STATISTICS, _NO_STATISTICS
+        mean = th.cat([state_norm.running_mean, action_norm.running_mean])
+        invstd = th.cat([state_norm.running_var, action_norm.running_var]).add_(state_norm.eps).sqrt_().reciprocal_()
+        return state_action.sub(mean).mul_(invstd).add_(0.0)  # + 0: a -0.0 comes out +0.0, as from the kernel
 
     def forward(self, obs: th.Tensor, actions: th.Tensor, trace: _Trace | None = None) -> th.Tensor:
         """

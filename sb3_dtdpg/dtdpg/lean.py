@@ -34,8 +34,9 @@ class FusedAdamStep:
     """
     One fused Adam step applied to a ``torch.optim.Adam(fused=True)`` optimizer's own state (its ``step``,
     ``exp_avg`` and ``exp_avg_sq`` tensors), given the gradients: the kernel ``Adam.step`` runs, without its
-    per-call bookkeeping. Any other optimizer (or set-up: several parameter groups, AMSGrad, hooks, a state not
-    yet created) goes through ``optimizer.step()`` with the gradients set on the parameters.
+    per-call bookkeeping; the ``step`` counts become views of one tensor, counted by one kernel. Any other optimizer
+    (or set-up: several parameter groups, AMSGrad, hooks, a state not yet created) goes through ``optimizer.step()``
+    with the gradients set on the parameters.
 
     :param optimizer: The optimizer whose parameters and state are updated
     """
@@ -45,6 +46,7 @@ class FusedAdamStep:
         self.params: list[th.Tensor] = [p for group in optimizer.param_groups for p in group["params"]]
         self._state: Any = None
         self._tensors: tuple[list[th.Tensor], list[th.Tensor], list[th.Tensor]] | None = None
+        self._step_counts: th.Tensor | None = None
 
     def _fusable(self) -> bool:
         optimizer = self.optimizer
@@ -71,6 +73,7 @@ class FusedAdamStep:
             if not self._fusable():
                 return None
             state = self.optimizer.state
+            self._step_counts = self._gather_step_counts(state)
             self._tensors = (
                 [state[p]["exp_avg"] for p in self.params],
                 [state[p]["exp_avg_sq"] for p in self.params],
@@ -78,6 +81,28 @@ class FusedAdamStep:
             )
             self._state = state
         return self._tensors
+
+    def _gather_step_counts(self, state: Any) -> th.Tensor | None:
+        """
+        Move the parameters' ``step`` counts into one tensor, each its own view of it (Adam's ``step`` tensors are
+        updated in place only), so that counting a step is one kernel instead of one per parameter.
+
+        :return: that tensor, or None where the counts are not all scalars of one floating-point dtype on the CPU
+        """
+        counts = [state[p]["step"] for p in self.params]
+        if (
+            not counts
+            or not all(
+                isinstance(c, th.Tensor) and c.dim() == 0 and c.device.type == "cpu" and c.dtype == counts[0].dtype
+                for c in counts
+            )
+            or not counts[0].is_floating_point()
+        ):
+            return None
+        flat = th.stack(counts)
+        for i, p in enumerate(self.params):
+            state[p]["step"] = flat[i]
+        return flat
 
     def step(self, grads: tuple[th.Tensor | None, ...]) -> None:
         """
@@ -97,7 +122,10 @@ class FusedAdamStep:
         group = self.optimizer.param_groups[0]
         beta1, beta2 = group["betas"]
         with th.no_grad():
-            th._foreach_add_(steps, 1)
+            if self._step_counts is not None:
+                self._step_counts.add_(1)
+            else:
+                th._foreach_add_(steps, 1)
             th._fused_adam_(
                 self.params,
                 list(grads),  # type: ignore[arg-type]
