@@ -414,3 +414,42 @@ def test_adam_step_counts_are_views_of_one_tensor(tmp_path: Path) -> None:
     counts = step_counts(loaded)
     assert len({c.untyped_storage().data_ptr() for c in counts}) == 1
     assert all(c.item() == loaded._n_updates == model._n_updates + 10 for c in counts)
+
+
+def test_batch_norm_statistics_are_copied_on_flat_buffers() -> None:
+    """The copy of the batch-norm statistics to the targets runs on one flat buffer per network, which the modules'
+    buffers and SB3's aliases of them both view: the targets' modules get the online statistics; a statistic given
+    new memory leaves the copy to SB3's aliases, as SB3's ``polyak_update`` does it."""
+    model = _small_model(learning_starts=10, batch_size=8, seed=0)
+    model.learn(20)
+    trainer = getattr(model, CACHE_ATTRIBUTE)
+    assert trainer._flat_statistics is not None
+    networks = {
+        "critic": (model.critic, model.critic_batch_norm_stats),
+        "critic_target": (model.critic_target, model.critic_batch_norm_stats_target),
+        "actor": (model.actor, model.actor_batch_norm_stats),
+        "actor_target": (model.actor_target, model.actor_batch_norm_stats_target),
+    }
+    for name, (network, aliases) in networks.items():
+        statistics = [buffer for key, buffer in network.named_buffers() if "running_" in key]
+        assert len({s.untyped_storage().data_ptr() for s in statistics}) == 1, name
+        assert [a.data_ptr() for a in aliases] == [s.data_ptr() for s in statistics], name
+
+    for statistic in model.critic_batch_norm_stats + model.actor_batch_norm_stats:
+        statistic.add_(1.0)
+    trainer.polyak(model.tau)
+    for online, target in (("critic", "critic_target"), ("actor", "actor_target")):
+        online_buffers = [b for key, b in networks[online][0].named_buffers() if "running_" in key]
+        target_buffers = [b for key, b in networks[target][0].named_buffers() if "running_" in key]
+        assert all(th.equal(a, b) for a, b in zip(online_buffers, target_buffers, strict=True))
+
+    norm = model.critic.q_networks[0][0].state_norm
+    norm.running_mean.data = norm.running_mean.data.clone() + 1.0  # the module's buffer only: SB3's alias stays behind
+    expected = [t.clone() for t in model.critic_batch_norm_stats_target + model.actor_batch_norm_stats_target]
+    polyak_update(model.critic_batch_norm_stats + model.actor_batch_norm_stats, expected, 1.0)
+    trainer.polyak(model.tau)
+    assert trainer._flat_statistics is None
+    for target, reference in zip(
+        model.critic_batch_norm_stats_target + model.actor_batch_norm_stats_target, expected, strict=True
+    ):
+        assert th.equal(target, reference)

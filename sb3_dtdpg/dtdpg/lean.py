@@ -6,9 +6,10 @@ Every floating-point operation, every draw of the random generators and every Ad
 happens here too, in the same order, so the parameters, batch-norm statistics and optimizer states are
 bit-identical to it (``tests/test_lean_step.py``). What is left out is work that changes no number: gradients of
 the critic's weights in the actor loss (:func:`torch.autograd.grad` with respect to the actor's parameters only),
-the per-call bookkeeping of ``Optimizer.step`` (the fused Adam kernel is applied to the optimizer's own state),
-one kernel per tensor in the Polyak updates (the parameters live in flat buffers, :class:`FlatPolyak`), and
-the checks and copies of ``predict`` when acting. For MLP networks on vector observations (DT-DPG's and SB3's own),
+the per-call bookkeeping of ``Optimizer.step`` (the fused Adam kernel is applied to the optimizer's own state, its
+step counts in one tensor), one kernel per tensor in the Polyak updates (the parameters and the batch-norm statistics
+live in flat buffers, :class:`FlatPolyak` and :class:`FlatStatistics`), and the checks and copies of ``predict``
+when acting. For MLP networks on vector observations (DT-DPG's and SB3's own),
 the forward and backward passes run without autograd's graph (:mod:`sb3_dtdpg.dtdpg.backprop`), the same kernels on
 the same tensors.
 """
@@ -172,18 +173,25 @@ class FlatPolyak:
         ``nn.Parameter`` in one pair once, contiguous, on the CPU, of its network's floating-point dtype, and match its
         online tensor's shape)"""
         tensors = [t for online, target in pairs for t in (*online, *target)]
+        if not all(isinstance(t, nn.Parameter) for t in tensors) or not cls._movable(pairs):
+            return None
+        return cls(pairs)
+
+    @staticmethod
+    def _movable(pairs: list[tuple[list[th.Tensor], list[th.Tensor]]]) -> bool:
+        """:return: whether each tensor is in one pair once, contiguous, on the CPU, of its network's floating-point
+        dtype, and of its online tensor's shape"""
+        tensors = [t for online, target in pairs for t in (*online, *target)]
         if not tensors or len({id(t) for t in tensors}) != len(tensors) or any(not online for online, _ in pairs):
-            return None
-        if not all(isinstance(t, nn.Parameter) for t in tensors):
-            return None
+            return False
         for online, target in pairs:
             dtype = online[0].dtype
             for t in (*online, *target):
                 if t.device.type != "cpu" or not t.is_contiguous() or t.dtype != dtype or not t.is_floating_point():
-                    return None
-            if any(a.shape != b.shape for a, b in zip(online, target, strict=True)):
-                return None
-        return cls(pairs)
+                    return False
+            if len(online) != len(target) or any(a.shape != b.shape for a, b in zip(online, target, strict=True)):
+                return False
+        return True
 
     @classmethod
     def _gather(cls, tensors: list[th.Tensor]) -> th.Tensor:
@@ -209,6 +217,54 @@ class FlatPolyak:
         for online, target in self.buffers:
             target.mul_(1 - tau)
             target.add_(online, alpha=tau)
+
+
+class FlatStatistics(FlatPolyak):
+    """
+    The copy of the batch-norm statistics to the targets (SB3's ``polyak_update`` with ``tau = 1``) on flat memory,
+    as :class:`FlatPolyak` updates the parameters: one buffer per network for its statistics, so that a copy is one
+    multiply and one add per network, the same operations on the same numbers. SB3's lists of statistics hold
+    detached aliases of the modules' buffers: each module buffer moves to its view, and so does its alias.
+
+    :param pairs: per network, the module buffers of its statistics and its target's, in the same order
+    :param aliases: SB3's aliases of the same buffers, in the same layout
+    """
+
+    def __init__(self, pairs: list[tuple[list[th.Tensor], list[th.Tensor]]], aliases: list[th.Tensor]):
+        super().__init__(pairs)
+        moved = [t for online, target in pairs for t in (*online, *target)]
+        for alias, buffer in zip(aliases, moved, strict=True):
+            alias.data = buffer.data
+        self.tensors = [*self.tensors, *aliases]
+        self.pointers = [t.data_ptr() for t in self.tensors]
+
+    @classmethod
+    def of_statistics(
+        cls, pairs: list[tuple[list[th.Tensor], list[th.Tensor]]], networks: list[nn.Module]
+    ) -> "FlatStatistics | None":
+        """
+        :param pairs: per network, SB3's aliases of its statistics and of its target's
+        :param networks: The modules holding those statistics
+        :return: the flat copies, or None where an alias is not one module buffer's, or the buffers do not allow them
+            (see :meth:`FlatPolyak.of`, buffers in place of parameters)
+        """
+        buffers: dict[int, list[th.Tensor]] = {}
+        for network in networks:
+            for buffer in network.buffers():
+                buffers.setdefault(buffer.data_ptr(), []).append(buffer)
+        owned: list[tuple[list[th.Tensor], list[th.Tensor]]] = []
+        for online, target in pairs:
+            owners: tuple[list[th.Tensor], list[th.Tensor]] = ([], [])
+            for aliases, found in zip((online, target), owners, strict=True):
+                for alias in aliases:
+                    candidates = [b for b in buffers.get(alias.data_ptr(), []) if b.shape == alias.shape]
+                    if len(candidates) != 1:
+                        return None
+                    found.append(candidates[0])
+            owned.append(owners)
+        if not cls._movable(owned):
+            return None
+        return cls(owned, [t for online, target in pairs for t in (*online, *target)])
 
 
 class LeanTrainer:
@@ -253,10 +309,15 @@ class LeanTrainer:
         self._flatten()
 
     def _flatten(self) -> None:
-        """Move the parameters to :class:`FlatPolyak` where it can take them, one buffer per network (so that a
-        network's ``state_dict`` saves its own parameters only); the statistics stay foreach passes."""
+        """Move the parameters to :class:`FlatPolyak` and the batch-norm statistics to :class:`FlatStatistics` where
+        they can take them, one buffer per network (so that a network's ``state_dict`` saves its own tensors only);
+        the rest stay foreach passes."""
         self._flat = FlatPolyak.of([(online, target) for online, target, copy in self.groups if not copy])
-        self._foreach_passes = self.passes if self._flat is None else [p for p in self.passes if p[2]]
+        self._flat_statistics = FlatStatistics.of_statistics(
+            [(online, target) for online, target, copy in self.groups if copy and target], list(self.owners[1:5])
+        )
+        flat = {False: self._flat is not None, True: self._flat_statistics is not None}
+        self._foreach_passes = [p for p in self.passes if not flat[p[2]]]
 
     @staticmethod
     def _owners(model: Any) -> tuple[Any, ...]:
@@ -269,13 +330,15 @@ class LeanTrainer:
 
     def polyak(self, tau: float) -> None:
         """SB3's ``polyak_update`` of the targets (``target = (1 - tau) * target + tau * online``), and the copy of the
-        batch-norm statistics (the same update with ``tau = 1``): the parameters on the flat buffers of
-        :class:`FlatPolyak` where it applies, the rest with one foreach kernel over the tensors of each pass."""
+        batch-norm statistics (the same update with ``tau = 1``): on the flat buffers of :class:`FlatPolyak` and
+        :class:`FlatStatistics` where they apply, the rest with one foreach kernel over the tensors of each pass."""
         with th.no_grad():
-            if self._flat is not None and not self._flat.current():
-                self._flatten()  # a parameter was given new memory (``.data``, ``.to()``)
+            if any(flat is not None and not flat.current() for flat in (self._flat, self._flat_statistics)):
+                self._flatten()  # a tensor was given new memory (``.data``, ``.to()``)
             if self._flat is not None:
                 self._flat.update(tau)
+            if self._flat_statistics is not None:
+                self._flat_statistics.update(1.0)
             for online, target, copy in self._foreach_passes:
                 weight = 1.0 if copy else tau
                 th._foreach_mul_(target, 1 - weight)
