@@ -11,8 +11,8 @@ DTDPG with its lean training step (the default: the backward passes written out)
 warm-up, the models alternate
 ``learn(--steps, reset_num_timesteps=False)`` chunks ``--repeats`` times (the order reversed every other round),
 so that load changes on the machine hit all alike. Printed: the median steps/s (wall clock) of each, and the
-median of the per-repeat ratios DTDPG / variant, from wall-clock and from process CPU time, and variant / SB3 DDPG
-(CPU time).
+median of the per-repeat ratios DTDPG / variant, from wall-clock (with their range: how much the machine's load
+moved them) and from process CPU time, and variant / SB3 DDPG (CPU time).
 
 The floors: copies of the same networks doing their forward passes, backward passes and fused Adam steps on one
 fixed batch (no env, no replay buffer, no target update, no logging), timed in the same rounds as the chunks:
@@ -198,10 +198,12 @@ def benchmark(env_id: str, net_arch: list[int], batch_size: int, steps: int, rep
             cpu[name].append(updates_per_s_cpu)
     lean_wall, lean_cpu = np.array(wall[DTDPG_LEAN]), np.array(cpu[DTDPG_LEAN])
     base_wall, base_cpu = np.array(wall[BASELINE]), np.array(cpu[BASELINE])
+    wall_ratios = {name: lean_wall / np.array(wall[name]) for name in models}
     results = {
         name: dict(
             steps_per_s=float(np.median(wall[name])),
-            ratio_wall=float(np.median(lean_wall / np.array(wall[name]))),
+            ratio_wall=float(np.median(wall_ratios[name])),
+            ratio_wall_range=(float(np.min(wall_ratios[name])), float(np.max(wall_ratios[name]))),
             ratio_cpu=float(np.median(lean_cpu / np.array(cpu[name]))),
             over_ddpg_cpu=float(np.median(np.array(cpu[name]) / base_cpu)),
         )
@@ -277,7 +279,7 @@ def main() -> None:
             print(f"{name:<40} {r['steps_per_s']:>14.0f} {r['cpu_steps_per_s']:>8.0f} {r['cpu_steps_per_s'] / base:>11.2f}x")
         return
     print(
-        f"{'env':<18} {'variant':<25} {'steps/s':>8} {'DTDPG/variant (wall)':>21} {'(CPU time)':>11} "
+        f"{'env':<18} {'variant':<25} {'steps/s':>8} {'DTDPG/variant (wall)':>21} {'range':>11} {'(CPU time)':>11} "
         f"{'variant/SB3 DDPG (CPU)':>23}"
     )
     for env_id in args.envs:
@@ -287,9 +289,11 @@ def main() -> None:
         results = benchmark(env_id, args.net_arch, args.batch_size, args.steps, args.repeats, args.seed)
         for name, r in results.items():
             if "ratio_wall" in r:
+                low, high = r["ratio_wall_range"]
+                spread = f"{low:.2f}-{high:.2f}"
                 print(
-                    f"{env_id:<18} {name:<25} {r['steps_per_s']:>8.0f} {r['ratio_wall']:>20.2f}x {r['ratio_cpu']:>10.2f}x "
-                    f"{r['over_ddpg_cpu']:>22.2f}x"
+                    f"{env_id:<18} {name:<25} {r['steps_per_s']:>8.0f} {r['ratio_wall']:>20.2f}x {spread:>11} "
+                    f"{r['ratio_cpu']:>10.2f}x {r['over_ddpg_cpu']:>22.2f}x"
                 )
             else:
                 print(
