@@ -370,9 +370,9 @@ def test_written_out_critic_input_norm_is_the_modules_bit_for_bit(training: bool
 
     model = _small_model(learning_starts=10, batch_size=8, seed=0)
     module = model.critic.q_networks[0][0]
+    written_out = MlpCritic(model.critic)
     generator = th.Generator().manual_seed(0)
     for case in range(20):
-        written_out = MlpCritic(model.critic)
         state_action = th.randn(32, module.features_dim + module.action_dim, generator=generator) * (case + 1)
         for norm in (module.state_norm, module.action_norm):
             norm.running_mean.copy_(th.randn(norm.num_features, generator=generator))
@@ -430,18 +430,19 @@ def test_batch_norm_statistics_are_copied_on_flat_buffers() -> None:
         "actor": (model.actor, model.actor_batch_norm_stats),
         "actor_target": (model.actor_target, model.actor_batch_norm_stats_target),
     }
-    for name, (network, aliases) in networks.items():
-        statistics = [buffer for key, buffer in network.named_buffers() if "running_" in key]
-        assert len({s.untyped_storage().data_ptr() for s in statistics}) == 1, name
-        assert [a.data_ptr() for a in aliases] == [s.data_ptr() for s in statistics], name
+    statistics = {
+        name: [buffer for key, buffer in network.named_buffers() if "running_" in key]
+        for name, (network, _) in networks.items()
+    }
+    for name, (_, aliases) in networks.items():
+        assert len({s.untyped_storage().data_ptr() for s in statistics[name]}) == 1, name
+        assert [a.data_ptr() for a in aliases] == [s.data_ptr() for s in statistics[name]], name
 
     for statistic in model.critic_batch_norm_stats + model.actor_batch_norm_stats:
         statistic.add_(1.0)
     trainer.polyak(model.tau)
     for online, target in (("critic", "critic_target"), ("actor", "actor_target")):
-        online_buffers = [b for key, b in networks[online][0].named_buffers() if "running_" in key]
-        target_buffers = [b for key, b in networks[target][0].named_buffers() if "running_" in key]
-        assert all(th.equal(a, b) for a, b in zip(online_buffers, target_buffers, strict=True))
+        assert all(th.equal(a, b) for a, b in zip(statistics[online], statistics[target], strict=True))
 
     norm = model.critic.q_networks[0][0].state_norm
     norm.running_mean.data = norm.running_mean.data.clone() + 1.0  # the module's buffer only: SB3's alias stays behind
