@@ -190,8 +190,10 @@ def _add_hyperparameter_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hyperparams", nargs="+", default=None, metavar="KEY:VALUE", help=_OVERRIDES_HELP)
 
 
-def _add_common_run_options(p: argparse.ArgumentParser, observation_default: str | None, observation_note: str) -> None:
-    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP)
+def _add_common_run_options(
+    p: argparse.ArgumentParser, observation_default: str | None, observation_note: str, preset_note: str = ""
+) -> None:
+    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP + preset_note)
     p.add_argument(  # compare and reproduce take whole presets: their run identities name the preset
         "--hyperparams",
         choices=_PRESETS,
@@ -368,7 +370,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="train only the runs of these downlink modes (default: noma oma); the tables use every finished run",
     )
-    _add_common_run_options(p, "goal", "default: goal; the paper_task experiment always runs on the paper's state")
+    _add_common_run_options(
+        p,
+        "goal",
+        "default: goal; the paper_task experiment always runs on the paper's state",
+        "; the paper_task experiments always train both sets, which they compare",
+    )
 
     p = command("evaluate", "test a saved model on the test missions and print the table of compare")
     _add_saved_model_options(p, "seed of the first test episode; episode i uses seed + i (default: 10000, as compare)")
