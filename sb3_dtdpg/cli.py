@@ -439,12 +439,12 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         paper = BUDGETS["paper"]
         from noma_radiomap.observations import DEFAULT_OBSERVATION
 
-        defaults = (
-            ("preset", args.hyperparams, default_preset(("dtdpg", "ddpg"))),
-            ("observation", args.observation, DEFAULT_OBSERVATION),
+        given = (  # an explicit --preset also picks the paper task's runs, even when it names the default set
+            ("preset", args.hyperparams, args.preset is not None or args.hyperparams != default_preset(("dtdpg", "ddpg"))),
+            ("observation", args.observation, args.observation != DEFAULT_OBSERVATION),
         )
         # the user's choices that are not the defaults: the same runs at the paper's scale
-        chosen = "".join(f" --{option} {value}" for option, value, default in defaults if value != default)
+        chosen = "".join(f" --{option} {value}" for option, value, is_set in given if is_set)
         print(
             f"This was the {args.budget!r} budget ({budget.episodes} training episodes per run). The paper's scale "
             f"({paper.episodes} and {paper.long_episodes} episodes, {paper.seeds} seeds; on 2 cores about 45 minutes "
@@ -480,6 +480,7 @@ def _run_reproduce(args: argparse.Namespace) -> None:
         train=not args.report_only,
         experiments=args.experiments,
         multiple_access=args.multiple_access,
+        paper_task_presets=None if args.preset is None else [args.preset],
         **_run_options(args),
     )
 

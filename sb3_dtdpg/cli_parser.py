@@ -30,6 +30,10 @@ _PRESETS = ("paper", "tuned")
 _OBSERVATIONS = ("goal", "destinations", "paper")
 _DEFAULT_ENV_ID = "NomaRadioMap-v0"
 _EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
+#: What ``--preset`` does to reproduce's paper-task experiments, which train both sets unless told otherwise.
+PAPER_TASK_PRESET_NOTE = (
+    "; the paper_task experiments train both sets, which they compare, unless --preset is given: then only its runs"
+)
 _PRESET_HELP = (
     "hyperparameter set. tuned: the best measured DT-DPG settings, for DT-DPG and DDPG alike (docs/BENCHMARKS.md; "
     "the default); paper: Table I (the default of td3, sac and tqc, which have no tuned set)"
@@ -374,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
         p,
         "goal",
         "default: goal; the paper_task experiment always runs on the paper's state",
-        "; the paper_task experiments always train both sets, which they compare",
+        PAPER_TASK_PRESET_NOTE,
     )
 
     p = command("evaluate", "test a saved model on the test missions and print the table of compare")

@@ -364,6 +364,8 @@ def test_reproduces_hint_at_the_papers_scale_keeps_the_users_choices(tmp_path, m
     )
     assert main(base) == 0
     assert "sb3-dtdpg reproduce --budget paper --out <folder>" in capsys.readouterr().out
+    assert main([*base, "--preset", "tuned"]) == 0  # the default set, but given: it picks the paper task's runs
+    assert "sb3-dtdpg reproduce --budget paper --preset tuned --out <folder>" in capsys.readouterr().out
 
 
 def test_train_on_another_env_keeps_an_earlier_model_and_tests_on_its_eval_seed(tmp_path, capsys):

@@ -233,6 +233,23 @@ def test_a_study_of_another_run_list_is_refused(tmp_path):
     assert run_study_worker(SPECS, tmp_path / "a", storage, "job", run=_recorder(ran)) == []  # the same job joins
 
 
+def test_a_reproduce_worker_takes_the_runs_of_reproduce_with_the_same_options(tmp_path, monkeypatch):
+    from sb3_dtdpg.experiments.reproduce import job_specs
+    from sb3_dtdpg.experiments.runs import get_budget
+
+    taken = []
+    monkeypatch.setattr(distributed, "run_study_worker", lambda specs, *args: taken.append(specs) or [])
+    options = ["--budget", "tiny", "--experiments", "paper_task", "--out", str(tmp_path), "--storage", "s.log"]
+    tiny = get_budget("tiny")
+    for preset, presets in ((None, None), ("paper", ["paper"]), ("tuned", ["tuned"])):
+        distributed.main(["reproduce", *options, "--study-name", "job", *(["--preset", preset] if preset else [])])
+        expected = job_specs(tiny, tiny.seeds, preset or "tuned", "goal", ["paper_task"], paper_task_presets=presets)
+        assert taken[-1] == expected
+        assert {s.hyperparams for s in taken[-1]} == set(presets or ["paper", "tuned"])
+    with pytest.raises(ValueError, match="paper_task_presets: only the reproduce job has paper task presets"):
+        study_specs("compare", "tiny", seeds=1, paper_task_presets=["paper"])
+
+
 @pytest.mark.parametrize("storage", ["missing_folder/study.log", "sqlite-typo:///study.db"])
 def test_a_storage_that_cannot_be_opened_is_one_error_line(tmp_path, capsys, storage):
     argv = ["compare", "--budget", "tiny", "--n-seeds", "1", "--out", str(tmp_path / "out"), "--study-name", "j"]

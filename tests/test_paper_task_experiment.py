@@ -10,8 +10,9 @@ import pandas as pd
 import pytest
 from stable_baselines3.common.logger import configure
 
-from sb3_dtdpg.experiments import paper_task
-from sb3_dtdpg.experiments.reproduce import reproduce_specs, run_reproduce
+from sb3_dtdpg import cli
+from sb3_dtdpg.experiments import paper_task, reproduce
+from sb3_dtdpg.experiments.reproduce import job_specs, reproduce_specs, run_reproduce
 from sb3_dtdpg.experiments.runs import get_budget, result_path, run_identity
 
 MICRO = get_budget("_micro")
@@ -124,6 +125,32 @@ def test_reproduce_trains_only_the_chosen_modes(tmp_path):
     learners = tables["paper_task"][tables["paper_task"]["preset"] != "-"]
     assert set(tables["paper_task"]["multiple_access"]) == {"OMA"} and len(learners) == 4
     assert "| OMA | 1 seed |" in (tmp_path / "paper_task.md").read_text()
+
+
+def test_a_chosen_preset_trains_only_its_half_of_the_paper_task():
+    both = job_specs(MICRO, 1, "tuned", experiments=["paper_task", "ddpg_vs_dtdpg"])
+    table_i = job_specs(MICRO, 1, "tuned", experiments=["paper_task", "ddpg_vs_dtdpg"], paper_task_presets=["paper"])
+    paper_runs = {s.run_id for s in reproduce_specs(MICRO, 1)["paper_task"]}
+    assert {s.hyperparams for s in both if s.run_id in paper_runs} == {"paper", "tuned"}
+    assert {s.hyperparams for s in table_i if s.run_id in paper_runs} == {"paper"}
+    # the other experiments keep their own set: the filter is the paper task's
+    assert [s for s in both if s.run_id not in paper_runs] == [s for s in table_i if s.run_id not in paper_runs]
+    assert len(table_i) == len(both) - len(paper_runs) // 2
+    with pytest.raises(ValueError, match=r"paper_task_presets: unknown \['table_i'\], expected some of \['paper', 'tuned'\]"):
+        job_specs(MICRO, 1, paper_task_presets=["table_i"])
+    with pytest.raises(ValueError, match=r"paper_task_presets: expected a list of names, got the string 'paper'"):
+        job_specs(MICRO, 1, paper_task_presets="paper")
+
+
+@pytest.mark.parametrize(
+    ("options", "presets"), [([], None), (["--preset", "tuned"], ["tuned"]), (["--preset", "paper"], ["paper"])]
+)
+def test_reproduces_preset_option_picks_the_paper_tasks_runs_only_when_given(tmp_path, monkeypatch, options, presets):
+    calls = []
+    monkeypatch.setattr(reproduce, "run_reproduce", lambda *args, **kwargs: calls.append(kwargs))
+    argv = ["reproduce", "--budget", "tiny", "--experiments", "paper_task", "--out", str(tmp_path), "--no-progress"]
+    assert cli.main([*argv, *options]) == 0
+    assert calls[0]["paper_task_presets"] == presets and calls[0]["hyperparams"] == (presets or ["tuned"])[0]
 
 
 def test_runs_of_two_folders_merge_into_one_table_and_conflicts_are_refused():

@@ -49,6 +49,7 @@ def study_specs(
     algos: Sequence[str] | None = None,
     env_id: str | None = None,
     scenario: str | None = None,
+    paper_task_presets: Sequence[str] | None = None,
 ) -> list[RunSpec]:
     """
     The runs of a job, in the order ``reproduce`` / ``compare`` run them (the same list on every machine).
@@ -64,20 +65,20 @@ def study_specs(
     :param algos: ``compare`` only: the algorithms (None: ``dtdpg`` and ``ddpg``)
     :param env_id: ``compare`` only: the env id (None: ``NomaRadioMap-v0``)
     :param scenario: ``compare`` only: the scenario (None: the budget's)
+    :param paper_task_presets: ``reproduce`` only: the paper-task experiments' runs of these hyperparameter sets
+        (None: both)
     :return: the unique runs
     """
     plan = get_budget(budget)
     seeds = plan.seeds if seeds is None else seeds
     modes = list(dict.fromkeys(multiple_access or ("noma", "oma")))
     if job == "reproduce":
-        from sb3_dtdpg.experiments.reproduce import DEFAULT_EXPERIMENTS, reproduce_specs
+        from sb3_dtdpg.experiments.reproduce import job_specs
 
-        by_experiment = reproduce_specs(plan, seeds, hyperparams, observation)
-        chosen = [spec for name in (experiments or DEFAULT_EXPERIMENTS) for spec in by_experiment[name]]
-        unique = list({spec.run_id: spec for spec in chosen if spec.multiple_access in modes}.values())
-        return sorted(unique, key=lambda spec: spec.seed)
-    if experiments is not None:
-        raise ValueError("experiments: only the reproduce job has experiments")
+        return job_specs(plan, seeds, hyperparams, observation, experiments, modes, paper_task_presets)
+    for name, value in (("experiments", experiments), ("paper_task_presets", paper_task_presets)):
+        if value is not None:
+            raise ValueError(f"{name}: only the reproduce job has {name.replace('_', ' ')}")
     if job == "compare":
         from sb3_dtdpg.baselines import DEFAULT_ENV_ID
         from sb3_dtdpg.experiments.compare import compare_job
@@ -251,11 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
             "--budget", type=cli_parser._budget, default=budget, help=f"budget name (default: {budget}, as for the CLI)"
         )
         cli_parser._add_seeds(p)  # --n-seeds (and the deprecated --seeds)
-        where = "" if job == "reproduce" else " where every algorithm has it, else paper"
+        where = cli_parser.PAPER_TASK_PRESET_NOTE if job == "reproduce" else " where every algorithm has it, else paper"
         preset_help = f"hyperparameter set (default: tuned{where})"
-        p.add_argument(
-            "--preset", choices=cli_parser._PRESETS, default="tuned" if job == "reproduce" else None, help=preset_help
-        )
+        p.add_argument("--preset", choices=cli_parser._PRESETS, default=None, help=preset_help)
         p.add_argument(
             "--hyperparams",
             choices=cli_parser._PRESETS,
@@ -318,13 +317,14 @@ def main(argv: list[str] | None = None) -> None:
             args.job,
             args.budget,
             args.n_seeds,
-            args.preset or cli.default_preset(args.algos or ("dtdpg", "ddpg")),
+            args.preset or cli.default_preset(getattr(args, "algos", None) or ("dtdpg", "ddpg")),
             args.observation,
             getattr(args, "experiments", None),
             args.multiple_access,
             getattr(args, "algos", None),
             getattr(args, "env", None),
             getattr(args, "scenario", None),
+            [args.preset] if args.job == "reproduce" and args.preset else None,
         )
         for spec in specs:
             check_budget(spec)

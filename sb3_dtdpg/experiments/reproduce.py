@@ -38,12 +38,14 @@ from sb3_dtdpg.experiments.compare import BEST_PLANNER, SHORTEST_PATH_PLANNER, e
 from sb3_dtdpg.experiments.paper_task import paper_task_specs, paper_task_tables
 from sb3_dtdpg.experiments.runs import Budget, RunReport, RunSpec, get_budget, load_results, output_lock, run_many
 from sb3_dtdpg.experiments.storage import result_path
+from sb3_dtdpg.presets import PRESETS
 
 __all__ = [
     "DEFAULT_EXPERIMENTS",
     "EXPERIMENTS",
     "LEARNING_RATES",
     "PAPER_TABLE_II",
+    "job_specs",
     "other_learning_rate",
     "reproduce_specs",
     "run_reproduce",
@@ -268,18 +270,64 @@ def finished_line(out: Path) -> Callable[[str], None]:
 
 
 def _check_arguments(
-    seeds: int, observation: str, experiments: Sequence[str] | None, multiple_access: Sequence[str] | None = None
+    seeds: int,
+    observation: str,
+    experiments: Sequence[str] | None,
+    multiple_access: Sequence[str] | None = None,
+    paper_task_presets: Sequence[str] | None = None,
 ) -> None:
     from noma_radiomap.registration import check_observation
 
     check_seeds(seeds)
     check_observation(observation)
-    unknown = sorted(set(experiments or ()) - set(EXPERIMENTS))
-    if unknown:
-        raise ValueError(f"experiments: unknown {unknown}, expected some of {list(EXPERIMENTS)}")
-    modes = sorted(set(multiple_access or ()) - {"noma", "oma"})
-    if modes:
-        raise ValueError(f"multiple_access: unknown {modes}, expected some of ['noma', 'oma']")
+    for name, given, known in (
+        ("experiments", experiments, EXPERIMENTS),
+        ("multiple_access", multiple_access, ("noma", "oma")),
+        ("paper_task_presets", paper_task_presets, PRESETS),
+    ):
+        if isinstance(given, str):  # a lone name would be taken letter by letter
+            raise ValueError(f"{name}: expected a list of names, got the string {given!r}")
+        unknown = sorted(set(given or ()) - set(known))
+        if unknown:
+            raise ValueError(f"{name}: unknown {unknown}, expected some of {list(known)}")
+
+
+def job_specs(
+    budget: Budget,
+    seeds: int,
+    hyperparams: str = "paper",
+    observation: str = "goal",
+    experiments: Sequence[str] | None = None,
+    multiple_access: Sequence[str] | None = None,
+    paper_task_presets: Sequence[str] | None = None,
+) -> list[RunSpec]:
+    """
+    The runs a ``reproduce`` job trains, each once, seed by seed (so that an interrupted job has whole seeds of
+    every experiment): the same list on every machine, which the workers of a distributed job share
+    (:mod:`sb3_dtdpg.experiments.distributed`).
+
+    :param budget: the budget
+    :param seeds: seeds per configuration
+    :param hyperparams: the hyperparameter set of the experiments other than the paper task's
+    :param observation: the observation of the experiments other than the paper task's
+    :param experiments: the runs of these experiments (None: :data:`DEFAULT_EXPERIMENTS`)
+    :param multiple_access: the runs of these downlink modes (None: both)
+    :param paper_task_presets: the paper-task experiments' runs of these hyperparameter sets only (None: both
+        Table I and the tuned set, which their tables compare)
+    :return: the runs
+    :raises ValueError: an unknown experiment, downlink mode or hyperparameter set
+    """
+    _check_arguments(seeds, observation, experiments, multiple_access, paper_task_presets)
+    by_experiment = reproduce_specs(budget, seeds, hyperparams, observation)
+    modes, sets = set(multiple_access or ("noma", "oma")), set(paper_task_presets or PRESETS)
+    chosen = [
+        spec
+        for name in (experiments or DEFAULT_EXPERIMENTS)
+        for spec in by_experiment[name]
+        if spec.multiple_access in modes and (name not in _PAPER_TASK_CHANNELS or spec.hyperparams in sets)
+    ]
+    unique = list({spec.run_id: spec for spec in chosen}.values())
+    return sorted(unique, key=lambda spec: spec.seed)
 
 
 def check_finished_runs(out: str | Path, specs: Sequence[RunSpec], job: str, instead: str) -> None:
@@ -317,6 +365,7 @@ def run_reproduce(
     observation: str = "goal",
     experiments: Sequence[str] | None = None,
     multiple_access: Sequence[str] | None = None,
+    paper_task_presets: Sequence[str] | None = None,
 ) -> dict[str, pd.DataFrame]:
     """
     Run (or resume) every experiment and write its tables (Markdown + CSV) and figures under ``out``.
@@ -335,6 +384,8 @@ def run_reproduce(
         :data:`DEFAULT_EXPERIMENTS`, all but ``paper_task_reality``); the tables and figures are drawn from every
         finished run either way
     :param multiple_access: train only the runs of these downlink modes (``"noma"``, ``"oma"``; None: both)
+    :param paper_task_presets: the paper-task experiments train only their runs of these hyperparameter sets
+        (``"paper"``, ``"tuned"``; None: both, which their tables compare)
     :return: the tables, by name
     :raises ValueError: on a bad argument, a budget that cannot train a run (before any run starts), or, with
         ``train=False``, an ``out`` that holds no finished run of this job (nothing is created)
@@ -346,27 +397,21 @@ def run_reproduce(
 
     budget = get_budget(budget)
     seeds = budget.seeds if seeds is None else seeds
-    _check_arguments(seeds, observation, experiments, multiple_access)
+    _check_arguments(seeds, observation, experiments, multiple_access, paper_task_presets)
     out = Path(out)
     _check_report_only(train, out, budget, seeds, hyperparams, observation)
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
-        chosen = experiments
+        wanted = job_specs(budget, seeds, hyperparams, observation, experiments, multiple_access, paper_task_presets)
         experiments = reproduce_specs(budget, seeds, hyperparams, observation)
         unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
-        # Seed by seed, so that an interrupted job has whole seeds of every experiment.
-        unique.sort(key=lambda spec: spec.seed)
-        modes = set(multiple_access or ("noma", "oma"))
-        wanted = {
-            s.run_id for name in (chosen or DEFAULT_EXPERIMENTS) for s in experiments[name] if s.multiple_access in modes
-        }
         # every stored run the tables will read is checked before anything trains, not only those trained now
         results = load_results(out, unique)
         report = RunReport()
         if train:
             report = run_many(
-                [s for s in unique if s.run_id in wanted],
+                wanted,
                 out,
                 n_workers=n_workers,
                 progress=progress,
@@ -466,7 +511,7 @@ def run_reproduce(
             out_tables["transfer_dip"] = dip
         _figures(out, budget, experiments, results, base_lr)
         print(
-            f"reproduce: {_counts(wanted, results, report)}; tables (.md, .csv) and figures (.png) in {out}/, "
+            f"reproduce: {_counts({spec.run_id for spec in wanted}, results, report)}; tables (.md, .csv) and figures (.png) in {out}/, "
             f"run folders in {out}/runs/, TensorBoard: tensorboard --logdir {out}/tb"
         )
         report.raise_failures(out)
