@@ -35,7 +35,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from sb3_dtdpg.cli_parser import _DEFAULT_ENV_ID, _PRESETS, build_parser
+from sb3_dtdpg.cli_parser import DEFAULT_ENV_ID, PRESETS, build_parser
 
 __all__ = ["build_parser", "main"]
 
@@ -99,7 +99,7 @@ def _split_hyperparams(args: argparse.Namespace) -> None:
     from sb3_dtdpg.overrides import parse_overrides
 
     items = list(getattr(args, "hyperparams", None) or [])
-    if len(items) == 1 and items[0] in _PRESETS:
+    if len(items) == 1 and items[0] in PRESETS:
         if args.preset is not None and args.preset != items[0]:
             args.error(f"--hyperparams {items[0]} and --preset {args.preset}: give the preset once, with --preset")
         print(f"{args.prog}: warning: --hyperparams {items[0]} is deprecated, use --preset {items[0]}", file=sys.stderr)
@@ -488,7 +488,7 @@ def _run_reproduce(args: argparse.Namespace) -> None:
 def _run_options(args: argparse.Namespace) -> dict[str, Any]:
     """
     :return: the keyword arguments of ``run_compare`` and ``run_reproduce`` from the options both commands take
-        (``--budget``, ``--n-seeds`` and those of :func:`sb3_dtdpg.cli_parser._add_common_run_options`)
+        (``--budget``, ``--n-seeds`` and those of :func:`sb3_dtdpg.cli_parser.add_common_run_options`)
     """
     return {
         "budget": args.budget,
@@ -519,7 +519,7 @@ def _saved_model_env(
 
     with _user_errors(args):
         saved = read_saved_model(args.model, args.algo)
-        env_id = args.env or saved.env_id or _DEFAULT_ENV_ID
+        env_id = args.env or saved.env_id or DEFAULT_ENV_ID
         if not is_mission_env(env_id):
             where = "--env" if args.env else f"the model's env ({args.model})"
             raise ValueError(f"{where}: {args.command} runs the NomaRadioMap test missions, got {env_id}")

@@ -21,15 +21,33 @@ from sb3_dtdpg.arguments import checked, positive_int
 from sb3_dtdpg.arguments import seed_count as _seed_count
 from sb3_dtdpg.arguments import seed_int as _seed
 
-__all__ = ["build_parser"]
+#: The parser, and what the distributed workers' parser (:mod:`sb3_dtdpg.experiments.distributed`) shares with it: the
+#: options' choices, the argument types and the option groups.
+__all__ = [
+    "ALGORITHMS",
+    "DEFAULT_ENV_ID",
+    "EXPERIMENTS",
+    "MODES",
+    "OBSERVATIONS",
+    "PAPER_TASK_PRESET_NOTE",
+    "PRESETS",
+    "DeprecatedOption",
+    "add_common_run_options",
+    "add_seeds",
+    "budget_name",
+    "build_parser",
+    "output_folder",
+    "registered_env_id",
+    "scenario_name",
+]
 
 # The choices of the options, spelled here so that --help needs no heavy import (tests/test_cli_errors.py checks
 # them against sb3_dtdpg.baselines, sb3_dtdpg.experiments.reproduce and noma_radiomap.registration).
-_ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
-_PRESETS = ("paper", "tuned")
-_OBSERVATIONS = ("goal", "destinations", "paper")
-_DEFAULT_ENV_ID = "NomaRadioMap-v0"
-_EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
+ALGORITHMS = ("dtdpg", "ddpg", "td3", "sac", "tqc")
+PRESETS = ("paper", "tuned")
+OBSERVATIONS = ("goal", "destinations", "paper")
+DEFAULT_ENV_ID = "NomaRadioMap-v0"
+EXPERIMENTS = ("table_ii", "ddpg_vs_dtdpg", "learning_rates", "paper_task", "paper_task_reality")
 #: What ``--preset`` does to reproduce's paper-task experiments, which train both sets unless told otherwise.
 PAPER_TASK_PRESET_NOTE = (
     "; the paper_task experiments train both sets, which they compare, unless --preset is given: then only its runs"
@@ -43,7 +61,7 @@ _OVERRIDES_HELP = (
     "policy_kwargs:'dict(net_arch=[64, 64], activation_fn=nn.Tanh)'); values are Python literals or torch's module "
     "and optimizer classes (nn.Tanh, th.optim.Adam)"
 )
-_MODES = ("noma", "oma")
+MODES = ("noma", "oma")
 _OBSERVATION_HELP = (
     "goal: each robot's position, destination, channel gain and arrived flag plus its direction and distance to "
     "its destination (an extension, docs/BENCHMARKS.md: what makes DT-DPG learn the mission in the paper's budget; "
@@ -56,7 +74,7 @@ _ENV_OBSERVATION_NOTE = "default: the env id's, paper on NomaRadioMapPaper-v0 an
 
 
 # ---------------------------------------------------------------------------------------------- argument types
-def _budget(value: str) -> str:
+def budget_name(value: str) -> str:
     from sb3_dtdpg.experiments.budgets import BUDGET_ALIASES, BUDGETS, PUBLIC_BUDGETS
 
     if value not in BUDGETS:
@@ -95,7 +113,7 @@ def _output_file(suffixes: tuple[str, ...]) -> Any:
     return check
 
 
-def _output_folder(value: str) -> str:
+def output_folder(value: str) -> str:
     """An output folder: it may not exist yet, but no part of its path may be a file (nor may it be empty: the
     current folder is written as ``.``)."""
     if not value.strip():
@@ -104,7 +122,7 @@ def _output_folder(value: str) -> str:
     return value
 
 
-def _scenario(value: str) -> str:
+def scenario_name(value: str) -> str:
     """
     A built-in scenario name or a scenario YAML file, loaded (so validated) once while parsing.
 
@@ -125,7 +143,7 @@ def _scenario(value: str) -> str:
     return value
 
 
-def _env_id(value: str) -> str:
+def registered_env_id(value: str) -> str:
     """A registered Gymnasium env id (the NomaRadioMap ids are registered by importing ``noma_radiomap``)."""
     import gymnasium as gym
 
@@ -138,7 +156,7 @@ def _env_id(value: str) -> str:
     return value
 
 
-class _DeprecatedOption(argparse.Action):
+class DeprecatedOption(argparse.Action):
     """The old spelling of an option: stores its value like the new one and says which one to use."""
 
     def __init__(self, option_strings: list[str], dest: str, replacement: str, **kwargs: Any) -> None:
@@ -176,7 +194,7 @@ def _budget_help(default: str) -> str:
     return f"experiment scale (default: {default}). %(budgets)s"
 
 
-def _add_seeds(p: argparse.ArgumentParser) -> None:
+def add_seeds(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--n-seeds",
         type=_seed_count,
@@ -185,29 +203,29 @@ def _add_seeds(p: argparse.ArgumentParser) -> None:
         help="seeds per configuration, 0..N-1 (default: the budget's)",
     )
     p.add_argument(
-        "--seeds", type=_seed_count, dest="n_seeds", action=_DeprecatedOption, replacement="--n-seeds", help=argparse.SUPPRESS
+        "--seeds", type=_seed_count, dest="n_seeds", action=DeprecatedOption, replacement="--n-seeds", help=argparse.SUPPRESS
     )
 
 
 def _add_hyperparameter_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP)
+    p.add_argument("--preset", choices=PRESETS, default=None, help=_PRESET_HELP)
     p.add_argument("--hyperparams", nargs="+", default=None, metavar="KEY:VALUE", help=_OVERRIDES_HELP)
 
 
-def _add_common_run_options(
+def add_common_run_options(
     p: argparse.ArgumentParser, observation_default: str | None, observation_note: str, preset_note: str = ""
 ) -> None:
-    p.add_argument("--preset", choices=_PRESETS, default=None, help=_PRESET_HELP + preset_note)
+    p.add_argument("--preset", choices=PRESETS, default=None, help=_PRESET_HELP + preset_note)
     p.add_argument(  # compare and reproduce take whole presets: their run identities name the preset
         "--hyperparams",
-        choices=_PRESETS,
+        choices=PRESETS,
         dest="preset",
-        action=_DeprecatedOption,
+        action=DeprecatedOption,
         replacement="--preset",
         help=argparse.SUPPRESS,
     )
     p.add_argument(
-        "--observation", choices=_OBSERVATIONS, default=observation_default, help=f"{_OBSERVATION_HELP} ({observation_note})"
+        "--observation", choices=OBSERVATIONS, default=observation_default, help=f"{_OBSERVATION_HELP} ({observation_note})"
     )
     p.add_argument("--workers", type=positive_int, default=None, help="parallel processes (default: number of CPUs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars; a line per finished run instead")
@@ -216,15 +234,15 @@ def _add_common_run_options(
 def _add_saved_model_options(p: argparse.ArgumentParser, seed_help: str) -> None:
     p.add_argument("model", help="a model zip (train/compare: <out>/runs/<run id>/model.zip; the RL Zoo's; model.save's)")
     p.add_argument(
-        "--algo", choices=_ALGORITHMS, default=None, help="the model's algorithm (default: from the run or the model file)"
+        "--algo", choices=ALGORITHMS, default=None, help="the model's algorithm (default: from the run or the model file)"
     )
-    p.add_argument("--env", type=_env_id, default=None, help=f"env id (default: the run's, else {_DEFAULT_ENV_ID})")
-    p.add_argument("--scenario", type=_scenario, default=None, help="scenario (default: the one the model was trained on)")
+    p.add_argument("--env", type=registered_env_id, default=None, help=f"env id (default: the run's, else {DEFAULT_ENV_ID})")
+    p.add_argument("--scenario", type=scenario_name, default=None, help="scenario (default: the one the model was trained on)")
     p.add_argument(
-        "--multiple-access", choices=_MODES, default=None, help="downlink mode (default: the one the model was trained on)"
+        "--multiple-access", choices=MODES, default=None, help="downlink mode (default: the one the model was trained on)"
     )
     p.add_argument(
-        "--observation", choices=_OBSERVATIONS, default=None, help="observation (default: the one the model was trained on)"
+        "--observation", choices=OBSERVATIONS, default=None, help="observation (default: the one the model was trained on)"
     )
     p.add_argument(
         "--channel",
@@ -261,32 +279,34 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("map", "write the power and SINR maps of a scenario (paper Fig. 4)")
     p.add_argument(
         "--scenario",
-        type=_scenario,
+        type=scenario_name,
         default="mall",
         help="built-in scenario name, or a YAML path (write ./name for a file named like a built-in) (default: mall)",
     )
     p.add_argument(
         "--out",
-        type=_output_folder,
+        type=output_folder,
         default="results/maps",
         help="output folder; the figure is maps_<scenario>.png (default: results/maps)",
     )
 
     p = command("train", "one training run with TensorBoard logging, then a test evaluation")
-    p.add_argument("--algo", required=True, choices=_ALGORITHMS, help="the algorithm")
+    p.add_argument("--algo", required=True, choices=ALGORITHMS, help="the algorithm")
     p.add_argument(
         "--env",
-        type=_env_id,
-        default=_DEFAULT_ENV_ID,
-        help=f"any registered Gymnasium env id (default: {_DEFAULT_ENV_ID}); --scenario, --multiple-access and "
+        type=registered_env_id,
+        default=DEFAULT_ENV_ID,
+        help=f"any registered Gymnasium env id (default: {DEFAULT_ENV_ID}); --scenario, --multiple-access and "
         "--channel apply to the NomaRadioMap envs only",
     )
-    p.add_argument("--scenario", type=_scenario, default=None, help="scenario name or YAML path (default: the env's, mall)")
+    p.add_argument(
+        "--scenario", type=scenario_name, default=None, help="scenario name or YAML path (default: the env's, mall)"
+    )
     budget = p.add_mutually_exclusive_group()
     budget.add_argument("--episodes", type=positive_int, default=500, help="training episodes (default: 500, the paper's)")
     budget.add_argument("--timesteps", type=positive_int, default=None, help="training timesteps instead of episodes")
     p.add_argument("--seed", type=_seed, default=0, help=f"seed of the run, 0..{_MAX_SEED} (default: 0)")
-    p.add_argument("--multiple-access", choices=_MODES, default=None, help="NOMA or OMA downlink (default: the env id's)")
+    p.add_argument("--multiple-access", choices=MODES, default=None, help="NOMA or OMA downlink (default: the env id's)")
     p.add_argument(
         "--channel", choices=("radio_map", "rayleigh"), default=None, help="training channel (default: the env id's)"
     )
@@ -294,14 +314,14 @@ def build_parser() -> argparse.ArgumentParser:
     _add_hyperparameter_options(p)
     p.add_argument(
         "--observation",
-        choices=_OBSERVATIONS,
+        choices=OBSERVATIONS,
         default=None,
         help=f"{_OBSERVATION_HELP} ({_ENV_OBSERVATION_NOTE})",
     )
-    p.add_argument("--tb", type=_output_folder, default=None, help="TensorBoard log folder (default: <out>/tb)")
+    p.add_argument("--tb", type=output_folder, default=None, help="TensorBoard log folder (default: <out>/tb)")
     p.add_argument(
         "--out",
-        type=_output_folder,
+        type=output_folder,
         default="results/train",
         help="output folder: on the NomaRadioMap envs <out>/runs/<run id>/ gets the model, checkpoints and result; "
         "on other envs the model is <algo>_<env id>_s<seed>.zip (default: results/train)",
@@ -325,44 +345,43 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     p = command("compare", "the main job: DT-DPG vs DDPG, NOMA and OMA, several seeds, table and figures")
-    p.add_argument("--budget", type=_budget, default="default", help=_budget_help("default"))
-    _add_seeds(p)
-    p.add_argument("--out", type=_output_folder, default="results/compare", help="output folder (default: results/compare)")
+    p.add_argument("--budget", type=budget_name, default="default", help=_budget_help("default"))
+    add_seeds(p)
+    p.add_argument("--out", type=output_folder, default="results/compare", help="output folder (default: results/compare)")
     p.add_argument(
-        "--algos", nargs="+", choices=_ALGORITHMS, default=["dtdpg", "ddpg"], help="algorithms (default: dtdpg ddpg)"
+        "--algos", nargs="+", choices=ALGORITHMS, default=["dtdpg", "ddpg"], help="algorithms (default: dtdpg ddpg)"
     )
     p.add_argument(
-        "--multiple-access", nargs="+", choices=_MODES, default=list(_MODES), help="downlink mode(s) (default: noma oma)"
+        "--multiple-access", nargs="+", choices=MODES, default=list(MODES), help="downlink mode(s) (default: noma oma)"
     )
     p.add_argument(
         "--modes",
         nargs="+",
-        choices=_MODES,
+        choices=MODES,
         dest="multiple_access",
-        action=_DeprecatedOption,
+        action=DeprecatedOption,
         replacement="--multiple-access",
         help=argparse.SUPPRESS,
     )
-    p.add_argument("--env", type=_env_id, default=_DEFAULT_ENV_ID, help=f"a NomaRadioMap env id (default: {_DEFAULT_ENV_ID})")
-    p.add_argument("--scenario", type=_scenario, default=None, help="scenario name or YAML path (default: the budget's)")
-    _add_common_run_options(p, None, _ENV_OBSERVATION_NOTE)
+    env_help = f"a NomaRadioMap env id (default: {DEFAULT_ENV_ID})"
+    p.add_argument("--env", type=registered_env_id, default=DEFAULT_ENV_ID, help=env_help)
+    p.add_argument("--scenario", type=scenario_name, default=None, help="scenario name or YAML path (default: the budget's)")
+    add_common_run_options(p, None, _ENV_OBSERVATION_NOTE)
 
     p = command("reproduce", "every experiment of the paper's Section V; finished runs are not re-run")
     p.add_argument(
         "--budget",
-        type=_budget,
+        type=budget_name,
         default="tiny",
         help=_budget_help("tiny, the whole pipeline in minutes, too short to learn; smoke shows learning"),
     )
-    _add_seeds(p)
-    p.add_argument(
-        "--out", type=_output_folder, default="results/reproduce", help="output folder (default: results/reproduce)"
-    )
+    add_seeds(p)
+    p.add_argument("--out", type=output_folder, default="results/reproduce", help="output folder (default: results/reproduce)")
     p.add_argument("--report-only", action="store_true", help="only re-draw tables and figures from the finished runs")
     p.add_argument(
         "--experiments",
         nargs="+",
-        choices=_EXPERIMENTS,
+        choices=EXPERIMENTS,
         default=None,
         help="train only the runs of these experiments (default: all but paper_task_reality; at the paper's scale about "
         "45 minutes on 2 cores without the paper task, which takes about 5 hours more); the tables use every finished run",
@@ -370,11 +389,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--multiple-access",
         nargs="+",
-        choices=_MODES,
+        choices=MODES,
         default=None,
         help="train only the runs of these downlink modes (default: noma oma); the tables use every finished run",
     )
-    _add_common_run_options(
+    add_common_run_options(
         p,
         "goal",
         "default: goal; the paper_task experiment always runs on the paper's state",

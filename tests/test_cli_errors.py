@@ -275,9 +275,9 @@ def test_the_option_choices_are_the_libraries(monkeypatch):
     from sb3_dtdpg.baselines import ALGORITHMS, DEFAULT_ENV_ID, HYPERPARAMS
     from sb3_dtdpg.experiments.reproduce import EXPERIMENTS
 
-    assert cli_parser._ALGORITHMS == ALGORITHMS and cli_parser._OBSERVATIONS == OBSERVATIONS
-    assert set(cli_parser._PRESETS) == set(HYPERPARAMS) and cli_parser._DEFAULT_ENV_ID == DEFAULT_ENV_ID
-    assert cli_parser._EXPERIMENTS == EXPERIMENTS
+    assert cli_parser.ALGORITHMS == ALGORITHMS and cli_parser.OBSERVATIONS == OBSERVATIONS
+    assert set(cli_parser.PRESETS) == set(HYPERPARAMS) and cli_parser.DEFAULT_ENV_ID == DEFAULT_ENV_ID
+    assert cli_parser.EXPERIMENTS == EXPERIMENTS
 
 
 def test_every_subcommand_of_the_parser_has_its_command():

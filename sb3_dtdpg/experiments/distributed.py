@@ -249,55 +249,55 @@ def build_parser() -> argparse.ArgumentParser:
         )
         p.set_defaults(error=p.error)
         p.add_argument(
-            "--budget", type=cli_parser._budget, default=budget, help=f"budget name (default: {budget}, as for the CLI)"
+            "--budget", type=cli_parser.budget_name, default=budget, help=f"budget name (default: {budget}, as for the CLI)"
         )
-        cli_parser._add_seeds(p)  # --n-seeds (and the deprecated --seeds)
+        cli_parser.add_seeds(p)  # --n-seeds (and the deprecated --seeds)
         where = cli_parser.PAPER_TASK_PRESET_NOTE if job == "reproduce" else " where every algorithm has it, else paper"
         preset_help = f"hyperparameter set (default: tuned{where})"
-        p.add_argument("--preset", choices=cli_parser._PRESETS, default=None, help=preset_help)
+        p.add_argument("--preset", choices=cli_parser.PRESETS, default=None, help=preset_help)
         p.add_argument(
             "--hyperparams",
-            choices=cli_parser._PRESETS,
+            choices=cli_parser.PRESETS,
             dest="preset",
-            action=cli_parser._DeprecatedOption,
+            action=cli_parser.DeprecatedOption,
             replacement="--preset",
             help=argparse.SUPPRESS,
         )
         if job == "compare":
             p.add_argument(
-                "--algos", nargs="+", choices=cli_parser._ALGORITHMS, default=None, help="algorithms (default: dtdpg ddpg)"
+                "--algos", nargs="+", choices=cli_parser.ALGORITHMS, default=None, help="algorithms (default: dtdpg ddpg)"
             )
             p.add_argument(
                 "--env",
-                type=cli_parser._env_id,
+                type=cli_parser.registered_env_id,
                 default=None,
-                help=f"a NomaRadioMap env id (default: {cli_parser._DEFAULT_ENV_ID})",
+                help=f"a NomaRadioMap env id (default: {cli_parser.DEFAULT_ENV_ID})",
             )
             p.add_argument(
                 "--scenario",
-                type=cli_parser._scenario,
+                type=cli_parser.scenario_name,
                 default=None,
                 help="scenario name or YAML path (default: the budget's)",
             )
         observation = "goal" if job == "reproduce" else None
         p.add_argument(
             "--observation",
-            choices=cli_parser._OBSERVATIONS,
+            choices=cli_parser.OBSERVATIONS,
             default=observation,
             help="observation (default: goal" + ("" if observation else "; paper for the paper task's env id") + ")",
         )
         p.add_argument(
-            "--multiple-access", nargs="+", choices=cli_parser._MODES, default=None, help="downlink modes (default: noma oma)"
+            "--multiple-access", nargs="+", choices=cli_parser.MODES, default=None, help="downlink modes (default: noma oma)"
         )
         if job == "reproduce":
             p.add_argument(
                 "--experiments",
                 nargs="+",
-                choices=cli_parser._EXPERIMENTS,
+                choices=cli_parser.EXPERIMENTS,
                 default=None,
                 help="the runs of these experiments (default: all but paper_task_reality, as for the CLI)",
             )
-        p.add_argument("--out", type=cli_parser._output_folder, required=True, help="the output folder shared by the workers")
+        p.add_argument("--out", type=cli_parser.output_folder, required=True, help="the output folder shared by the workers")
         p.add_argument("--storage", required=True, help="Optuna storage URL, or a .log path (JournalFile)")
         p.add_argument("--study-name", required=True)
     return parser

@@ -510,8 +510,9 @@ def run_reproduce(
         if dip is not None:
             out_tables["transfer_dip"] = dip
         _figures(out, budget, experiments, results, base_lr)
+        counts = _counts({spec.run_id for spec in wanted}, results, report)
         print(
-            f"reproduce: {_counts({spec.run_id for spec in wanted}, results, report)}; tables (.md, .csv) and figures (.png) in {out}/, "
+            f"reproduce: {counts}; tables (.md, .csv) and figures (.png) in {out}/, "
             f"run folders in {out}/runs/, TensorBoard: tensorboard --logdir {out}/tb"
         )
         report.raise_failures(out)
