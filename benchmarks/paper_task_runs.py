@@ -7,11 +7,14 @@ Table I preset with a single value changed on the paper's task::
       sb3-dtdpg train --algo $algo --env NomaRadioMapPaper-v0 --preset paper --hyperparams gamma:0.95 \\
           --episodes 500 --seed $seed --out results/paper_task_ablation --no-progress
     done; done
-    python benchmarks/paper_task_runs.py results/paper_task_ablation --csv docs/csv/paper_task_gamma.csv
+    python benchmarks/paper_task_runs.py results/paper_task_ablation --csv docs/csv/paper_task_gamma.csv \
+        --figure docs/figures/paper_task_gamma_success.png
 
 Training success is the share of training episodes in which every robot reached its destination (all episodes,
 the first 100, the last 100; :func:`sb3_dtdpg.experiments.paper_task.training_success` on the run's TensorBoard
-folder); the test columns are the run's 20 Rayleigh test missions. Below the per-run table: mean and 95 % CI
+folder); the test columns are the run's 20 Rayleigh test missions. ``--figure`` draws the training success per
+episode (a rolling mean over 20 episodes, as ``reproduce``'s paper-task figure), one curve per configuration and
+algorithm, the mean over its seeds with a 95 % CI band. Below the per-run table: mean and 95 % CI
 per configuration (t-interval over seeds) and DT-DPG - DDPG paired by seed. A configuration is every setting of
 a run but its algorithm and seed (:data:`CONFIGURATION_FIELDS`: preset, overrides, learning rate, env, scenario,
 channel, training episodes, ...); the tables show those that differ between the runs, the others are printed once.
@@ -147,6 +150,36 @@ def shown_configuration(frame: pd.DataFrame) -> tuple[list[str], dict[str, str]]
     return shown, common
 
 
+def plot_success(frame: pd.DataFrame, out: Path, path: Path) -> Any:
+    """
+    The training success per episode of the runs of ``frame``, one curve per configuration and algorithm.
+
+    :param frame: output of :func:`run_rows`
+    :param out: the output folder of the runs (their TensorBoard folders are ``<out>/tb/<run id>``)
+    :param path: the PNG to write
+    :return: the figure
+    """
+    from sb3_dtdpg.experiments import plots, tables
+
+    configuration, common = shown_configuration(frame)
+    groups: dict[str, list[Path]] = {}
+    for _, row in frame.iterrows():
+        values = [_text(row[column]) for column in configuration]
+        upper = [column == "multiple_access" for column in configuration]  # NOMA, OMA as in the other tables
+        values = [value.upper() if up else value for value, up in zip(values, upper, strict=True)]
+        label = " ".join([tables.ALGO_LABELS[row["algo"]], *(value for value in values if value != "-")])
+        groups.setdefault(label, []).append(out / "tb" / row["run_id"])
+    channel = {"radio_map": "radio-map training", "rayleigh": "Rayleigh training"}.get(common.get("channel", "-"), "")
+    return plots.plot_learning_curves(
+        groups,
+        path,
+        tags=((plots.SUCCESS_TAG, "training episodes reaching the destination"),),
+        smooth=20,
+        title=f"The paper's task: training success per episode\n{channel}".rstrip(),
+        band_note=True,
+    )
+
+
 def _text(value: Any) -> str:
     """A configuration value as table text: ``-`` for None (the default) or nothing, numbers without a trailing ``.0``."""
     if value is None or value == "" or (isinstance(value, float) and math.isnan(value)):
@@ -162,6 +195,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
     parser.add_argument("out", type=Path, help="the output folder of the train runs")
     parser.add_argument("--csv", type=Path, default=None, help="also write the table here")
+    parser.add_argument("--figure", type=Path, default=None, help="also draw the training success per episode here (PNG)")
     args = parser.parse_args()
     if not (args.out / "runs").is_dir():
         parser.error(f"{args.out}: no runs/ folder (give the --out of the train runs)")
@@ -171,6 +205,9 @@ def main() -> None:
     if args.csv is not None:
         args.csv.parent.mkdir(parents=True, exist_ok=True)
         frame.to_csv(args.csv, index=False)
+    if args.figure is not None:
+        args.figure.parent.mkdir(parents=True, exist_ok=True)
+        plot_success(frame, args.out, args.figure)
     configuration, common = shown_configuration(frame)
     hidden = [column for column in CONFIGURATION if column not in configuration]
     print("every run: " + ", ".join(f"{column} {value}" for column, value in common.items()) + "\n")

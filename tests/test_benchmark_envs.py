@@ -51,6 +51,11 @@ def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
     assert paired["train_success"].iloc[0].startswith("25.0 ± ") and paired["test_mqi"].iloc[0].startswith("50.0 ± ")
     summary = paper_task_runs.summary_rows(rows)
     assert list(summary["algo"]) == ["dtdpg", "ddpg"] and list(summary["train_success"].str[:4]) == ["75.0", "50.0"]
+    figure = paper_task_runs.plot_success(rows, tmp_path, tmp_path / "success.png")
+    curves = {line.get_label(): line.get_ydata() for line in figure.axes[0].get_lines() if "seed" in line.get_label()}
+    assert set(curves) == {"DT-DPG paper gamma:0.95 NOMA (1 seed)", "DDPG paper gamma:0.95 NOMA (1 seed)"}
+    assert curves["DT-DPG paper gamma:0.95 NOMA (1 seed)"][-1] == pytest.approx(0.75)  # all 4 episodes in the window
+    assert (tmp_path / "success.png").stat().st_size > 0
 
 
 def test_paper_task_runs_counts_timestep_runs_stored_with_the_unused_episodes_as_one_configuration(tmp_path):
