@@ -439,8 +439,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         paper = BUDGETS["paper"]
         from noma_radiomap.observations import DEFAULT_OBSERVATION
 
-        given = (  # an explicit --preset also picks the paper task's runs, even when it names the default set
-            ("preset", args.hyperparams, args.preset is not None or args.hyperparams != default_preset(("dtdpg", "ddpg"))),
+        given = (  # a --preset given also picks the paper task's runs, even when it names the default set
+            ("preset", args.hyperparams, args.preset is not None),
             ("observation", args.observation, args.observation != DEFAULT_OBSERVATION),
         )
         # the user's choices that are not the defaults: the same runs at the paper's scale
