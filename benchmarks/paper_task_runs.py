@@ -3,11 +3,11 @@
 ``reproduce``'s ``paper_task`` experiment tabulates its own runs; this reads runs trained one at a time, e.g. the
 Table I preset with a single value changed on the paper's task::
 
-    for seed in 0 1; do for algo in dtdpg ddpg; do
+    for seed in 0 1 2 3 4; do for algo in dtdpg ddpg; do
       sb3-dtdpg train --algo $algo --env NomaRadioMapPaper-v0 --preset paper --hyperparams gamma:0.95 \\
           --episodes 500 --seed $seed --out results/paper_task_ablation --no-progress
     done; done
-    python benchmarks/paper_task_runs.py results/paper_task_ablation --csv docs/csv/paper_task_gamma.csv \
+    python benchmarks/paper_task_runs.py results/paper_task_ablation --csv docs/csv/paper_task_gamma.csv \\
         --figure docs/figures/paper_task_gamma_success.png
 
 Training success is the share of training episodes in which every robot reached its destination (all episodes,
