@@ -164,10 +164,8 @@ def plot_success(frame: pd.DataFrame, out: Path, path: Path) -> Any:
     configuration, common = shown_configuration(frame)
     groups: dict[str, list[Path]] = {}
     for _, row in frame.iterrows():
-        values = [_text(row[column]) for column in configuration]
-        upper = [column == "multiple_access" for column in configuration]  # NOMA, OMA as in the other tables
-        values = [value.upper() if up else value for value, up in zip(values, upper, strict=True)]
-        label = " ".join([tables.ALGO_LABELS[row["algo"]], *(value for value in values if value != "-")])
+        shown = [_text(row[column]).upper() if column == "multiple_access" else _text(row[column]) for column in configuration]
+        label = " ".join([tables.ALGO_LABELS[row["algo"]], *(text for text in shown if text != "-")])
         groups.setdefault(label, []).append(out / "tb" / row["run_id"])
     channel = {"radio_map": "radio-map training", "rayleigh": "Rayleigh training"}.get(common.get("channel", "-"), "")
     return plots.plot_learning_curves(

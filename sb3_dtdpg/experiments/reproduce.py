@@ -319,6 +319,16 @@ def job_specs(
     """
     _check_arguments(seeds, observation, experiments, multiple_access, paper_task_presets)
     by_experiment = reproduce_specs(budget, seeds, hyperparams, observation)
+    return _chosen_specs(by_experiment, experiments, multiple_access, paper_task_presets)
+
+
+def _chosen_specs(
+    by_experiment: dict[str, list[RunSpec]],
+    experiments: Sequence[str] | None,
+    multiple_access: Sequence[str] | None,
+    paper_task_presets: Sequence[str] | None,
+) -> list[RunSpec]:
+    """:func:`job_specs` from the runs of every experiment (:func:`reproduce_specs`), the arguments checked"""
     modes, sets = set(multiple_access or ("noma", "oma")), set(paper_task_presets or PRESETS)
     chosen = [
         spec
@@ -403,8 +413,9 @@ def run_reproduce(
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
-        wanted = job_specs(budget, seeds, hyperparams, observation, experiments, multiple_access, paper_task_presets)
+        chosen = experiments
         experiments = reproduce_specs(budget, seeds, hyperparams, observation)
+        wanted = _chosen_specs(experiments, chosen, multiple_access, paper_task_presets)
         unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
         # every stored run the tables will read is checked before anything trains, not only those trained now
         results = load_results(out, unique)
