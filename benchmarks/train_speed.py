@@ -14,8 +14,9 @@ so that load changes on the machine hit all alike. Printed: the median steps/s (
 median of the per-repeat ratios DTDPG / variant, from wall-clock (with their range: how much the machine's load
 moved them) and from process CPU time, and variant / SB3 DDPG (CPU time).
 
-The floors: copies of the same networks doing their forward passes, backward passes and fused Adam steps on one
-fixed batch (no env, no replay buffer, no target update, no logging), timed in the same rounds as the chunks:
+The floors: copies of the same networks doing their forward passes, backward passes and fused Adam steps (on a copy
+of the model's Adam state, with its settings) on one fixed batch (no env, no replay buffer, no target update, no
+logging), timed in the same rounds as the chunks:
 updates/s, what steps/s would be at one update per step if nothing else cost anything. Through autograd for both
 algorithms' networks, and written out (:mod:`sb3_dtdpg.dtdpg.backprop`) for DTDPG's. The ceiling: the written-out
 floor plus SB3's rollout loop and replay sampling, timed as a DTDPG whose gradient steps only sample their batches
@@ -26,6 +27,12 @@ the update.
     python benchmarks/train_speed.py --net-arch 400 300   # the networks of the DDPG paper
     python benchmarks/train_speed.py --envs Pendulum-v1 --steps 1000 --repeats 9
     python benchmarks/train_speed.py --vec-envs 8          # DTDPG on 1 env vs the batched vector env of 8
+    python benchmarks/train_speed.py --flush-denormals     # all with subnormal floats flushed to zero
+
+Adam's moments of the weights whose gradients stay zero (those of ReLU units that no sample activates) decay by
+``beta1`` per update through the subnormal floats, which CPUs compute with a slow microcode path; with
+``--flush-denormals`` (``torch.set_flush_denormal(True)``, in every model and floor alike) those become zero: faster
+on such CPUs, and no longer the default's numbers bit for bit.
 
 With ``--vec-envs N``: DTDPG on one ``NomaRadioMap-v0`` env against DTDPG on ``MissionVecEnv`` of N missions,
 ``train_freq=1`` and ``gradient_steps=-1`` (N gradient steps per vector step: the single env's one update per
@@ -84,15 +91,27 @@ def _timed_learn(model: DDPG, steps: int) -> tuple[float, float]:
     return steps / (time.perf_counter() - wall), steps / (time.process_time() - cpu)
 
 
+def _fused_copy(optimizer: th.optim.Optimizer) -> th.optim.Adam:
+    """:return: a fused Adam optimizer with the settings and a copy of the state of ``optimizer`` (an Adam optimizer
+    with one parameter group), so that its steps run on the same moments: Adam's moments of parameters whose
+    gradients stay zero decay through subnormal floats, which some CPUs compute far more slowly than normal ones"""
+    group = optimizer.param_groups[0]
+    params = list(group["params"])
+    fused = th.optim.Adam(params, lr=group["lr"], betas=group["betas"], eps=group["eps"], fused=True)
+    for param in params:
+        fused.state[param] = {key: value.clone() for key, value in optimizer.state[param].items()}
+    return fused
+
+
 def _floor_copy(model: DDPG, batch_size: int) -> tuple[Any, Any, Any]:
-    """:return: one batch of the model's replay buffer, its discounts, and a copy of its policy in training mode with
-    new fused Adam optimizers"""
+    """:return: one batch of the model's replay buffer, its discounts, and a copy of its policy in training mode
+    whose optimizers are fused Adam ones with the model's settings and a copy of its optimizers' state"""
     data = model.replay_buffer.sample(batch_size)
     discounts = data.discounts if data.discounts is not None else model.gamma
-    policy = copy.deepcopy(model.policy)
+    policy = copy.deepcopy(model.policy)  # its optimizers' states follow it to the copied parameters
     policy.set_training_mode(True)
-    policy.actor.optimizer = th.optim.Adam(policy.actor.parameters(), lr=1e-4, fused=True)
-    policy.critic.optimizer = th.optim.Adam(policy.critic.parameters(), lr=1e-4, fused=True)
+    policy.actor.optimizer = _fused_copy(policy.actor.optimizer)
+    policy.critic.optimizer = _fused_copy(policy.critic.optimizer)
     return data, discounts, policy
 
 
@@ -263,14 +282,25 @@ def main() -> None:
     parser.add_argument("--repeats", type=positive_int, default=5, help="timed chunks per algorithm, alternating")
     parser.add_argument("--threads", type=positive_int, default=1, help="torch intra-op threads (1: fastest for small nets)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--flush-denormals",
+        action="store_true",
+        help="flush subnormal floats to zero in every model and floor (torch.set_flush_denormal): faster on CPUs slow "
+        "with them, no longer the default's numbers bit for bit",
+    )
     args = parser.parse_args()
     th.set_num_threads(args.threads)
+    if args.flush_denormals and not th.set_flush_denormal(True):
+        parser.error("--flush-denormals: this CPU cannot flush subnormal floats to zero")
     try:
         import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)
     except ImportError:
         pass
 
-    print(f"net_arch={args.net_arch} batch_size={args.batch_size} steps={args.steps} x {args.repeats} threads={args.threads}")
+    print(
+        f"net_arch={args.net_arch} batch_size={args.batch_size} steps={args.steps} x {args.repeats} threads={args.threads}"
+        f" flush_denormals={args.flush_denormals}"
+    )
     if args.vec_envs > 0:
         results = vec_benchmark(args.vec_envs, args.net_arch, args.batch_size, args.steps, args.repeats, args.seed)
         base = results["1 env"]["cpu_steps_per_s"]

@@ -12,6 +12,7 @@ from scripts import load_script
         ("train_speed", ["--repeats", "0"], "argument --repeats: expected a positive integer, got '0'"),  # printed nan ratios
         ("train_speed", ["--batch-size", "1"], "argument --batch-size: expected a batch size >= 2, got '1'"),
         ("train_speed", ["--net-arch", "64", "0"], "argument --net-arch: expected a positive integer, got '0'"),
+        ("update_breakdown", ["--updates", "0"], "argument --updates: expected a positive integer, got '0'"),
         ("env_speed", ["--rounds", "0"], "argument --rounds: expected a positive integer, got '0'"),  # a ZeroDivisionError
         ("env_speed", ["--steps", "0"], "argument --steps: expected a positive integer, got '0'"),
         ("radiomap_build", ["--repeats", "0"], "argument --repeats: expected a positive integer, got '0'"),
