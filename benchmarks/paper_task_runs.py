@@ -15,15 +15,25 @@ the first 100, the last 100; :func:`sb3_dtdpg.experiments.paper_task.training_su
 folder); the test columns are the run's 20 Rayleigh test missions. ``--figure`` draws the training success per
 episode (a rolling mean over 20 episodes, as ``reproduce``'s paper-task figure), one curve per configuration and
 algorithm, the mean over its seeds with a 95 % CI band. Below the per-run table: mean and 95 % CI
-per configuration (t-interval over seeds) and DT-DPG - DDPG paired by seed. A configuration is every setting of
-a run but its algorithm and seed (:data:`CONFIGURATION_FIELDS`: preset, overrides, learning rate, env, scenario,
-channel, training episodes, ...); the tables show those that differ between the runs, the others are printed once.
+per configuration (t-interval over seeds), DT-DPG - DDPG paired by seed, and where runs of both downlinks are there,
+NOMA - OMA per algorithm paired by seed. A configuration is every setting of a run but its algorithm and seed
+(:data:`CONFIGURATION_FIELDS`: preset, overrides, learning rate, multiple access, env, scenario, channel, training
+episodes, ...); the tables show those that differ between the runs, the others are printed once.
+
+``--with-csv`` adds the runs of per-run tables this script wrote before (``--csv``), e.g. of runs whose folders are
+gone, to those of the folder: the OMA runs of the same set-up beside the NOMA ones of ``docs/csv/``::
+
+    python benchmarks/paper_task_runs.py results/paper_task_oma --with-csv docs/csv/paper_task_gamma.csv \
+        --csv docs/csv/paper_task_gamma.csv --figure docs/figures/paper_task_gamma_oma_success.png
+
+A run in both is the folder's. The figure draws the folder's runs only (a table holds no per-episode success).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import io
 import json
 import math
 from pathlib import Path
@@ -109,6 +119,30 @@ def run_rows(out: Path) -> pd.DataFrame:
     return frame.sort_values(order, ascending=[column != "algo" for column in order], kind="stable")
 
 
+def with_tables(frame: pd.DataFrame, tables: list[Path]) -> pd.DataFrame:
+    """
+    :param frame: output of :func:`run_rows`
+    :param tables: per-run tables written by ``--csv`` (the columns of :func:`run_rows`)
+    :return: the runs of ``frame`` and those of the tables that ``frame`` has not (by run id), sorted as
+        :func:`run_rows` sorts; every value as read from a CSV file, so that a value missing in one source and in
+        another compares equal
+    :raises ValueError: a table lacks a column of :func:`run_rows`, naming the file and the columns
+    """
+    columns = ["run_id", "algo", *CONFIGURATION, "seed", "episodes", *METRICS, "wall_s"]
+    read = []
+    for table in tables:
+        rows = pd.read_csv(table)
+        missing = [column for column in columns if column not in rows.columns]
+        if missing:
+            raise ValueError(f"--with-csv {table}: not a table of this script (no columns {', '.join(missing)})")
+        read.append(rows[columns])
+    own = pd.read_csv(io.StringIO(frame.to_csv(index=False))) if not frame.empty else pd.DataFrame(columns=columns)
+    others = [rows[~rows["run_id"].isin(own["run_id"])] for rows in read]
+    combined = pd.concat([own, *others], ignore_index=True).drop_duplicates("run_id")
+    order = [*CONFIGURATION, "algo", "seed"]
+    return combined.sort_values(order, ascending=[column != "algo" for column in order], kind="stable")
+
+
 def summary_rows(frame: pd.DataFrame) -> pd.DataFrame:
     """
     :param frame: output of :func:`run_rows`
@@ -137,6 +171,23 @@ def paired_rows(frame: pd.DataFrame) -> pd.DataFrame:
             _with_ci(value, half, metric) for value, half in zip(differences[metric], differences[f"{metric}_ci"], strict=True)
         ]
     return differences[[*CONFIGURATION, "contrast", "n", *METRICS]]
+
+
+def access_rows(frame: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param frame: output of :func:`run_rows`
+    :return: NOMA - OMA per configuration but the downlink, and per algorithm, on the seeds both have: ``n`` (pairs)
+        and ``<difference> ± <95 % CI>``; empty where no configuration has runs of both
+    """
+    by = [*(column for column in CONFIGURATION if column != "multiple_access"), "algo"]
+    differences = paired_differences(frame, "multiple_access", "noma", "oma", by=by, metrics=METRICS)
+    if differences.empty:
+        return pd.DataFrame(columns=[*by, "contrast", "n", *METRICS])
+    for metric in METRICS:
+        differences[metric] = [
+            _with_ci(value, half, metric) for value, half in zip(differences[metric], differences[f"{metric}_ci"], strict=True)
+        ]
+    return differences[[*by, "contrast", "n", *METRICS]]
 
 
 def shown_configuration(frame: pd.DataFrame) -> tuple[list[str], dict[str, str]]:
@@ -194,18 +245,32 @@ def main() -> None:
     parser.add_argument("out", type=Path, help="the output folder of the train runs")
     parser.add_argument("--csv", type=Path, default=None, help="also write the table here")
     parser.add_argument("--figure", type=Path, default=None, help="also draw the training success per episode here (PNG)")
+    parser.add_argument(
+        "--with-csv",
+        type=Path,
+        nargs="+",
+        default=[],
+        help="per-run tables written by --csv before: their runs join the folder's (not the figure)",
+    )
     args = parser.parse_args()
     if not (args.out / "runs").is_dir():
         parser.error(f"{args.out}: no runs/ folder (give the --out of the train runs)")
-    frame = run_rows(args.out)
-    if frame.empty:
+    for table in args.with_csv:
+        if not table.is_file():
+            parser.error(f"--with-csv {table}: no such file")
+    folder_runs = run_rows(args.out)
+    if folder_runs.empty:
         parser.error(f"{args.out}: no finished run (runs/*/result.json)")
+    try:
+        frame = with_tables(folder_runs, args.with_csv) if args.with_csv else folder_runs
+    except ValueError as error:
+        parser.error(str(error))
     if args.csv is not None:
         args.csv.parent.mkdir(parents=True, exist_ok=True)
         frame.to_csv(args.csv, index=False)
     if args.figure is not None:
         args.figure.parent.mkdir(parents=True, exist_ok=True)
-        plot_success(frame, args.out, args.figure)
+        plot_success(folder_runs, args.out, args.figure)
     configuration, common = shown_configuration(frame)
     hidden = [column for column in CONFIGURATION if column not in configuration]
     print("every run: " + ", ".join(f"{column} {value}" for column, value in common.items()) + "\n")
@@ -223,6 +288,12 @@ def main() -> None:
         paired = paired.drop(columns=hidden)
         print("\npaired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences); success in points")
         print(paired.assign(**{c: paired[c].map(_text) for c in configuration}).to_string(index=False))
+    access = access_rows(frame)
+    if not access.empty:
+        access = access.drop(columns=[column for column in hidden if column in access.columns])
+        shown_columns = [column for column in configuration if column in access.columns]
+        print("\nNOMA - OMA, paired by seed, per algorithm; success in points")
+        print(access.assign(**{c: access[c].map(_text) for c in shown_columns}).to_string(index=False))
 
 
 if __name__ == "__main__":

@@ -58,6 +58,53 @@ def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
     assert (tmp_path / "success.png").stat().st_size > 0
 
 
+def _fake_paper_task_run(out, algo, access, seed, successes, mqi):
+    """A finished ``sb3-dtdpg train`` run of the paper's task in ``out``: its result and its success per episode."""
+    from stable_baselines3.common.logger import configure
+
+    run_id = f"{algo}_{access}_s{seed}_hp1"
+    logger = configure(str(out / "tb" / run_id), ["tensorboard"])
+    for episode, success in enumerate(successes, start=1):
+        logger.record("mission/success", float(success))
+        logger.record("episode/number", episode)
+        logger.dump(episode)
+    logger.close()
+    (out / "runs" / run_id).mkdir(parents=True)
+    spec = {"algo": algo, "hyperparams": "paper", "overrides": [["gamma", "0.95"]], "multiple_access": access, "seed": seed}
+    result = {"spec": spec, "eval": {"summary": {"success_rate": 1.0, "mqi": mqi}}, "train": {"wall_s": 2.0}}
+    (out / "runs" / run_id / "result.json").write_text(json.dumps(result))
+
+
+def test_paper_task_runs_joins_earlier_tables_and_pairs_noma_with_oma(tmp_path, monkeypatch, capsys):
+    paper_task_runs = load_script("paper_task_runs")
+    noma, oma = tmp_path / "noma", tmp_path / "oma"
+    for seed in (0, 1):
+        _fake_paper_task_run(noma, "dtdpg", "noma", seed, [1, 1, 1, 0], 850.0 + seed)
+        _fake_paper_task_run(noma, "ddpg", "noma", seed, [0, 0, 1, 1], 800.0)
+        _fake_paper_task_run(oma, "dtdpg", "oma", seed, [1, 0, 0, 0], 840.0)
+    _fake_paper_task_run(oma, "dtdpg", "noma", 0, [1, 1, 1, 0], 852.0)  # in both sources: the folder's counts, once
+    table = tmp_path / "noma.csv"
+    paper_task_runs.run_rows(noma).to_csv(table, index=False)
+    rows = paper_task_runs.with_tables(paper_task_runs.run_rows(oma), [table])
+    assert len(rows) == 6 and rows["run_id"].is_unique
+    assert sorted(zip(rows["algo"], rows["multiple_access"], strict=True)) == sorted(
+        [("dtdpg", "noma")] * 2 + [("ddpg", "noma")] * 2 + [("dtdpg", "oma")] * 2
+    )
+    assert list(paper_task_runs.summary_rows(rows)["n"]) == [2, 2, 2]  # one configuration per downlink and algorithm
+    access = paper_task_runs.access_rows(rows)
+    assert list(access["algo"]) == ["dtdpg"] and list(access["n"]) == [2]
+    assert access["train_success"].iloc[0].startswith("50.0 ± ") and access["test_mqi"].iloc[0].startswith("11.5 ± ")
+    command = ["paper_task_runs.py", str(oma), "--with-csv", str(table), "--csv", str(tmp_path / "all.csv")]
+    monkeypatch.setattr("sys.argv", command)
+    paper_task_runs.main()
+    assert "NOMA - OMA" in capsys.readouterr().out and len(paper_task_runs.pd.read_csv(tmp_path / "all.csv")) == 6
+    (tmp_path / "other.csv").write_text("run_id,algo\nx,dtdpg\n")
+    monkeypatch.setattr("sys.argv", ["paper_task_runs.py", str(oma), "--with-csv", str(tmp_path / "other.csv")])
+    with pytest.raises(SystemExit) as exit_info:
+        paper_task_runs.main()
+    assert exit_info.value.code == 2 and "not a table of this script (no columns preset, " in capsys.readouterr().err
+
+
 def test_paper_task_runs_counts_timestep_runs_stored_with_the_unused_episodes_as_one_configuration(tmp_path):
     paper_task_runs = load_script("paper_task_runs")
     for seed, episodes in ((0, 500), (1, None)):  # stored before and after train --timesteps recorded no episodes
