@@ -163,14 +163,7 @@ def paired_rows(frame: pd.DataFrame) -> pd.DataFrame:
     :param frame: output of :func:`run_rows`
     :return: DT-DPG - DDPG per configuration on the seeds both have: ``n`` (pairs) and ``<difference> ± <95 % CI>``
     """
-    differences = paired_differences(frame, "algo", "dtdpg", "ddpg", by=CONFIGURATION, metrics=METRICS)
-    if differences.empty:
-        return pd.DataFrame(columns=[*CONFIGURATION, "contrast", "n", *METRICS])
-    for metric in METRICS:
-        differences[metric] = [
-            _with_ci(value, half, metric) for value, half in zip(differences[metric], differences[f"{metric}_ci"], strict=True)
-        ]
-    return differences[[*CONFIGURATION, "contrast", "n", *METRICS]]
+    return _paired(frame, "algo", ("dtdpg", "ddpg"), CONFIGURATION)
 
 
 def access_rows(frame: pd.DataFrame) -> pd.DataFrame:
@@ -180,7 +173,13 @@ def access_rows(frame: pd.DataFrame) -> pd.DataFrame:
         and ``<difference> ± <95 % CI>``; empty where no configuration has runs of both
     """
     by = [*(column for column in CONFIGURATION if column != "multiple_access"), "algo"]
-    differences = paired_differences(frame, "multiple_access", "noma", "oma", by=by, metrics=METRICS)
+    return _paired(frame, "multiple_access", ("noma", "oma"), by)
+
+
+def _paired(frame: pd.DataFrame, contrast: str, sides: tuple[str, str], by: list[str]) -> pd.DataFrame:
+    """:return: the metrics' differences ``sides[0] - sides[1]`` of column ``contrast``, paired by seed within each
+    configuration of ``by``, as ``<difference> ± <95 % CI>`` text (see :func:`paired_differences`)"""
+    differences = paired_differences(frame, contrast, *sides, by=by, metrics=METRICS)
     if differences.empty:
         return pd.DataFrame(columns=[*by, "contrast", "n", *METRICS])
     for metric in METRICS:

@@ -27,21 +27,9 @@ def test_targets_env_kwargs_may_name_another_layout():
 
 
 def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
-    from stable_baselines3.common.logger import configure
-
     paper_task_runs = load_script("paper_task_runs")
     for algo, successes, mqi in (("ddpg", [0, 0, 1, 1], 800.0), ("dtdpg", [1, 1, 1, 0], 850.0)):
-        run_id = f"{algo}_noma_s0_hp1"
-        logger = configure(str(tmp_path / "tb" / run_id), ["tensorboard"])
-        for episode, success in enumerate(successes, start=1):
-            logger.record("mission/success", float(success))
-            logger.record("episode/number", episode)
-            logger.dump(episode)
-        logger.close()
-        (tmp_path / "runs" / run_id).mkdir(parents=True)
-        spec = {"algo": algo, "hyperparams": "paper", "overrides": [["gamma", "0.95"]], "multiple_access": "noma", "seed": 0}
-        result = {"spec": spec, "eval": {"summary": {"success_rate": 1.0, "mqi": mqi}}, "train": {"wall_s": 2.0}}
-        (tmp_path / "runs" / run_id / "result.json").write_text(json.dumps(result))
+        _fake_paper_task_run(tmp_path, algo, "noma", 0, successes, mqi)
     rows = paper_task_runs.run_rows(tmp_path)
     assert list(rows["algo"]) == ["dtdpg", "ddpg"] and set(rows["overrides"]) == {"gamma:0.95"}
     assert list(rows["train_success"]) == [0.75, 0.5] and list(rows["episodes"]) == [4, 4]
