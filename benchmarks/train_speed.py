@@ -30,7 +30,7 @@ the update.
     python benchmarks/train_speed.py --flush-denormals     # all with subnormal floats flushed to zero
 
 Adam's moments of the weights whose gradients stay zero (those of ReLU units that no sample activates) decay by
-``beta1`` per update through the subnormal floats, which CPUs compute with a slow microcode path; with
+``beta1`` per update through the subnormal floats, which some CPUs compute on a slow path; with
 ``--flush-denormals`` (``torch.set_flush_denormal(True)``, in every model and floor alike) those become zero: faster
 on such CPUs, and no longer the default's numbers bit for bit.
 
@@ -97,7 +97,8 @@ def _fused_copy(optimizer: th.optim.Optimizer) -> th.optim.Adam:
     gradients stay zero decay through subnormal floats, which some CPUs compute far more slowly than normal ones"""
     group = optimizer.param_groups[0]
     params = list(group["params"])
-    fused = th.optim.Adam(params, lr=group["lr"], betas=group["betas"], eps=group["eps"], fused=True)
+    settings = {key: group[key] for key in ("lr", "betas", "eps", "weight_decay")}
+    fused = th.optim.Adam(params, **settings, fused=True)
     for param in params:
         fused.state[param] = {key: value.clone() for key, value in optimizer.state[param].items()}
     return fused

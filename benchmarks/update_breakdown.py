@@ -15,7 +15,7 @@ steps, then its lean update (target, critic and actor steps with the backward pa
 
 Every round starts from the same snapshot of the networks and optimizer states, so that each variant updates the
 same Adam moments: those of the weights whose gradients stay zero (ReLU units no sample activates) decay by
-``beta1`` per update through the subnormal floats, which many CPUs compute with a slow microcode path. Each variant
+``beta1`` per update through the subnormal floats, which some CPUs compute on a slow path. Each variant
 is timed as trained and with subnormal floats flushed to zero (``torch.set_flush_denormal``; the numbers then differ
 from the default's). Printed: microseconds per update (median over rounds) and the difference to the fixed batch.
 

@@ -18,7 +18,7 @@ def test_the_floor_steps_a_fused_copy_of_the_models_adam_state(algo):
     for name in ("actor", "critic"):
         original, copied = getattr(model, name).optimizer, getattr(policy, name).optimizer
         assert copied.param_groups[0]["fused"] and bool(original.param_groups[0].get("fused")) == (algo is DTDPG)
-        for key in ("lr", "betas", "eps"):
+        for key in ("lr", "betas", "eps", "weight_decay"):
             assert copied.param_groups[0][key] == original.param_groups[0][key]
         originals = [p for group in original.param_groups for p in group["params"]]
         copies = list(getattr(policy, name).parameters())
