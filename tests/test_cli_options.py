@@ -100,10 +100,10 @@ def test_train_hyperparameters_the_model_refuses_are_one_line_and_create_nothing
 
 
 def test_the_seed_count_limit_is_the_jobs(capsys):
-    from sb3_dtdpg import cli_parser
+    from sb3_dtdpg.arguments import seed_count
     from sb3_dtdpg.experiments.budgets import MAX_SEEDS
 
-    assert cli_parser._seed_count(str(MAX_SEEDS)) == MAX_SEEDS  # the CLI's bound is the job's
+    assert seed_count(str(MAX_SEEDS)) == MAX_SEEDS  # the CLI's bound is the job's
     code, printed = run_cli(["compare", "--n-seeds", str(10**11)], capsys)  # was 2 GB of run specs, then a hang
     assert code == 2 and f"expected a number of seeds from 1 to {MAX_SEEDS:,}, got '{10**11}'" in printed.err
 
