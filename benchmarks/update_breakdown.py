@@ -25,6 +25,7 @@ from the default's). Printed: microseconds per update (median over rounds) and t
 
 import argparse
 import copy
+import itertools
 import time
 from collections.abc import Callable
 
@@ -61,8 +62,7 @@ def update_variants(model: DTDPG) -> dict[str, Callable[[], None]]:
         raise ValueError("update_breakdown: the model's networks are not written out (an MLP policy on a Box space)")
     batch_size = model.batch_size
     fixed = model.replay_buffer.sample(batch_size)
-    batches = [model.replay_buffer.sample(batch_size) for _ in range(N_BATCHES)]
-    turn = iter(range(1 << 62))
+    batches = itertools.cycle([model.replay_buffer.sample(batch_size) for _ in range(N_BATCHES)])
 
     def update(data) -> None:
         target = lean._target_q_values(model, data, networks)
@@ -74,7 +74,7 @@ def update_variants(model: DTDPG) -> dict[str, Callable[[], None]]:
 
     return {
         "one fixed batch": lambda: update(fixed),
-        f"{N_BATCHES} batches in turn": lambda: update(batches[next(turn) % N_BATCHES]),
+        f"{N_BATCHES} batches in turn": lambda: update(next(batches)),
         "a sample, then the fixed batch": lambda: (sample(), update(fixed)),
         "np.random.randint, then the fixed batch": lambda: (np.random.randint(0, N_BATCHES, size=batch_size), update(fixed)),
         "a fresh sample per update": lambda: update(sample()),
@@ -130,7 +130,7 @@ def main() -> None:
     args = parser.parse_args()
     th.set_num_threads(1)
     if not th.set_flush_denormal(False):
-        parser.error("this CPU cannot flush subnormal floats to zero (no SSE3)")
+        parser.error("this CPU cannot flush subnormal floats to zero")
     try:
         import noma_radiomap  # noqa: F401  (registers NomaRadioMap-v0)
     except ImportError:
