@@ -113,8 +113,11 @@ def run_rows(out: Path) -> pd.DataFrame:
             }
         )
     frame = pd.DataFrame(rows)
-    if not rows:
-        return frame
+    return _sorted(frame) if rows else frame
+
+
+def _sorted(frame: pd.DataFrame) -> pd.DataFrame:
+    """:return: the runs sorted by configuration (:data:`CONFIGURATION`), algorithm (DT-DPG first) and seed"""
     order = [*CONFIGURATION, "algo", "seed"]
     return frame.sort_values(order, ascending=[column != "algo" for column in order], kind="stable")
 
@@ -137,10 +140,7 @@ def with_tables(frame: pd.DataFrame, tables: list[Path]) -> pd.DataFrame:
             raise ValueError(f"--with-csv {table}: not a table of this script (no columns {', '.join(missing)})")
         read.append(rows[columns])
     own = pd.read_csv(io.StringIO(frame.to_csv(index=False))) if not frame.empty else pd.DataFrame(columns=columns)
-    others = [rows[~rows["run_id"].isin(own["run_id"])] for rows in read]
-    combined = pd.concat([own, *others], ignore_index=True).drop_duplicates("run_id")
-    order = [*CONFIGURATION, "algo", "seed"]
-    return combined.sort_values(order, ascending=[column != "algo" for column in order], kind="stable")
+    return _sorted(pd.concat([own, *read], ignore_index=True).drop_duplicates("run_id"))  # the first: the folder's
 
 
 def summary_rows(frame: pd.DataFrame) -> pd.DataFrame:
@@ -279,20 +279,22 @@ def main() -> None:
     for column in ("train_success", "train_success_first100", "train_success_last100", "test_success"):
         shown[column] = (100 * shown[column]).round(1)
     print(shown.to_string(index=False, float_format=lambda value: f"{value:.1f}"))
-    print("\nmean ± 95 % CI (t-interval over seeds; n/a: one seed); success in %")
-    summary = summary_rows(frame).drop(columns=hidden)
-    print(summary.assign(**{c: summary[c].map(_text) for c in configuration}).to_string(index=False))
-    paired = paired_rows(frame)
-    if not paired.empty:
-        paired = paired.drop(columns=hidden)
-        print("\npaired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences); success in points")
-        print(paired.assign(**{c: paired[c].map(_text) for c in configuration}).to_string(index=False))
-    access = access_rows(frame)
-    if not access.empty:
-        access = access.drop(columns=[column for column in hidden if column in access.columns])
-        shown_columns = [column for column in configuration if column in access.columns]
-        print("\nNOMA - OMA, paired by seed, per algorithm; success in points")
-        print(access.assign(**{c: access[c].map(_text) for c in shown_columns}).to_string(index=False))
+    _print_table("mean ± 95 % CI (t-interval over seeds; n/a: one seed); success in %", summary_rows(frame), configuration)
+    paired_title = "paired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences); success in points"
+    _print_table(paired_title, paired_rows(frame), configuration)
+    _print_table("NOMA - OMA, paired by seed, per algorithm; success in points", access_rows(frame), configuration)
+
+
+def _print_table(title: str, rows: pd.DataFrame, configuration: list[str]) -> None:
+    """Print ``rows`` under ``title`` with the shown configuration columns as text and without the others (nothing
+    for no rows)."""
+    if rows.empty:
+        return
+    hidden = [column for column in CONFIGURATION if column not in configuration and column in rows.columns]
+    shown = rows.drop(columns=hidden)
+    text = {column: shown[column].map(_text) for column in configuration if column in shown.columns}
+    print(f"\n{title}")
+    print(shown.assign(**text).to_string(index=False))
 
 
 if __name__ == "__main__":

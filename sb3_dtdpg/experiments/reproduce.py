@@ -413,10 +413,9 @@ def run_reproduce(
     out.mkdir(parents=True, exist_ok=True)
     with output_lock(out):  # one job per folder: a second one would write the same run folders
         base_lr = base_learning_rate("dtdpg", hyperparams)  # checks the set first
-        chosen = experiments
-        experiments = reproduce_specs(budget, seeds, hyperparams, observation)
-        wanted = _chosen_specs(experiments, chosen, multiple_access, paper_task_presets)
-        unique = list({spec.run_id: spec for specs in experiments.values() for spec in specs}.values())
+        by_experiment = reproduce_specs(budget, seeds, hyperparams, observation)
+        wanted = _chosen_specs(by_experiment, experiments, multiple_access, paper_task_presets)
+        unique = list({spec.run_id: spec for specs in by_experiment.values() for spec in specs}.values())
         # every stored run the tables will read is checked before anything trains, not only those trained now
         results = load_results(out, unique)
         report = RunReport()
@@ -435,10 +434,10 @@ def run_reproduce(
             report = RunReport.of_stored(results)
 
         def incomplete(name: str) -> str | None:
-            return report.incomplete_note(s.run_id for s in experiments[name])
+            return report.incomplete_note(s.run_id for s in by_experiment[name])
 
         def records(name: str) -> pd.DataFrame:
-            return tables.run_records([results[s.run_id] for s in experiments[name] if results[s.run_id] is not None])
+            return tables.run_records([results[s.run_id] for s in by_experiment[name] if results[s.run_id] is not None])
 
         out_tables: dict[str, pd.DataFrame] = {}
         # The planners on the test missions, evaluated once for every table that compares with them
@@ -502,9 +501,9 @@ def run_reproduce(
             out_tables["learning_rates"] = summary
             if progress:
                 tables.print_table(summary, "Learning rates (DT-DPG)", columns=("multiple_access", "learning_rate"))
-        out_tables.update(_paper_task_tables(out, budget, experiments, results, progress, report))
+        out_tables.update(_paper_task_tables(out, budget, by_experiment, results, progress, report))
         # paired in their own tables
-        task_runs = {spec.run_id for name in _PAPER_TASK_CHANNELS for spec in experiments[name]}
+        task_runs = {spec.run_id for name in _PAPER_TASK_CHANNELS for spec in by_experiment[name]}
         paired = _paired_table(
             out,
             budget,
@@ -517,10 +516,10 @@ def run_reproduce(
             out_tables["paired"] = paired
             if progress:
                 print(tables.format_paired_markdown(paired, ("algorithm", "multiple_access", "approach", "learning_rate")))
-        dip = _dip_table(out, experiments, results)
+        dip = _dip_table(out, by_experiment, results)
         if dip is not None:
             out_tables["transfer_dip"] = dip
-        _figures(out, budget, experiments, results, base_lr)
+        _figures(out, budget, by_experiment, results, base_lr)
         counts = _counts({spec.run_id for spec in wanted}, results, report)
         print(
             f"reproduce: {counts}; tables (.md, .csv) and figures (.png) in {out}/, "
