@@ -14,11 +14,13 @@ Training success is the share of training episodes in which every robot reached 
 the first 100, the last 100; :func:`sb3_dtdpg.experiments.paper_task.training_success` on the run's TensorBoard
 folder); the test columns are the run's 20 Rayleigh test missions. ``--figure`` draws the training success per
 episode (a rolling mean over 20 episodes, as ``reproduce``'s paper-task figure), one curve per configuration and
-algorithm, the mean over its seeds with a 95 % CI band. Below the per-run table: mean and 95 % CI
-per configuration (t-interval over seeds), DT-DPG - DDPG paired by seed, and where runs of both downlinks are there,
-NOMA - OMA per algorithm paired by seed. A configuration is every setting of a run but its algorithm and seed
-(:data:`CONFIGURATION_FIELDS`: preset, overrides, learning rate, multiple access, env, scenario, channel, training
-episodes, ...); the tables show those that differ between the runs, the others are printed once.
+algorithm, the mean over its seeds with a 95 % CI band. Below the per-run table: mean and 95 % CI per configuration
+(t-interval over seeds), DT-DPG - DDPG paired by seed; where runs of both downlinks are there, NOMA - OMA per
+algorithm paired by seed; where runs differ in their overrides only (an ablation: DT-DPG with ``phases:[...]`` beside
+the runs without), each algorithm of the longer overrides against each of the other, paired by seed (a curriculum
+shows as its reward phases, ``phases:combined/combined``). A configuration is every setting of a run but its
+algorithm and seed (:data:`CONFIGURATION_FIELDS`: preset, overrides, learning rate, multiple access, env, scenario,
+channel, training episodes, ...); the tables show those that differ between the runs, the others are printed once.
 
 ``--with-csv`` adds the runs of per-run tables this script wrote before (``--csv``), e.g. of runs whose folders are
 gone, to those of the folder: the OMA runs of the same set-up beside the NOMA ones of ``docs/csv/``::
@@ -32,10 +34,12 @@ A run in both is the folder's. The figure draws the folder's runs only (a table 
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import io
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -176,6 +180,57 @@ def access_rows(frame: pd.DataFrame) -> pd.DataFrame:
     return _paired(frame, "multiple_access", ("noma", "oma"), by)
 
 
+def override_rows(frame: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param frame: output of :func:`run_rows`
+    :return: runs that differ in their overrides (an ablation of a set-up) against each other, paired by seed within
+        the rest of their configuration: each algorithm of the one with the longer overrides text minus each
+        algorithm of the other, ``n`` (pairs) and ``<difference> ± <95 % CI>``; empty where no configuration has
+        runs of two overrides
+    """
+    by = [column for column in CONFIGURATION if column != "overrides"]
+    variants = frame.assign(
+        variant=[f"{algo} {_text(text)}" for algo, text in zip(frame["algo"], frame["overrides"], strict=True)]
+    )
+    kinds = variants[["algo", "overrides", "variant"]].drop_duplicates("variant")
+    kinds = kinds.assign(length=kinds["overrides"].map(lambda text: len(_text(text))))
+    tables = []
+    for _, first in kinds.iterrows():
+        for _, second in kinds.iterrows():
+            if first["length"] > second["length"]:
+                rows = _paired(variants, "variant", (first["variant"], second["variant"]), by)
+                tables.append(rows.assign(contrast=f"{_variant_label(first)} - {_variant_label(second)}"))
+    rows = [table for table in tables if not table.empty]
+    return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=[*by, "contrast", "n", *METRICS])
+
+
+def _variant_label(kind: pd.Series) -> str:
+    """:return: e.g. ``dtdpg gamma:0.95 phases:[{'name'...``, the algorithm and its overrides (:func:`_short_overrides`)"""
+    overrides = _short_overrides(kind["overrides"])
+    return kind["algo"] if overrides == "-" else f"{kind['algo']} {overrides}"
+
+
+#: Where one ``name:value`` of an overrides text begins (values such as a list of phases hold spaces)
+_OVERRIDE_START = re.compile(r" (?=[A-Za-z_]\w*:)")
+
+
+def _short_overrides(text: Any) -> str:
+    """:return: an overrides text for a label: a curriculum's ``phases`` as its reward phases
+    (``phases:combined/combined``), any other value longer than 20 characters cut to its first 8 and ``...``; ``-``
+    for none"""
+    items = [item.partition(":") for item in _OVERRIDE_START.split(_text(text))]
+    return " ".join(name + colon + _short_value(name, value) for name, colon, value in items)
+
+
+def _short_value(name: str, value: str) -> str:
+    if name == "phases":
+        try:
+            return "/".join(str(phase.get("reward_phase", phase.get("name"))) for phase in ast.literal_eval(value))
+        except (ValueError, SyntaxError, TypeError, AttributeError):
+            pass
+    return value if len(value) <= 20 else value[:8] + "..."
+
+
 def _paired(frame: pd.DataFrame, contrast: str, sides: tuple[str, str], by: list[str]) -> pd.DataFrame:
     """:return: the metrics' differences ``sides[0] - sides[1]`` of column ``contrast``, paired by seed within each
     configuration of ``by``, as ``<difference> ± <95 % CI>`` text (see :func:`paired_differences`)"""
@@ -214,7 +269,7 @@ def plot_success(frame: pd.DataFrame, out: Path, path: Path) -> Any:
     configuration, common = shown_configuration(frame)
     groups: dict[str, list[Path]] = {}
     for _, row in frame.iterrows():
-        shown = [_text(row[column]).upper() if column == "multiple_access" else _text(row[column]) for column in configuration]
+        shown = [_label_text(column, row[column]) for column in configuration]
         label = " ".join([tables.ALGO_LABELS[row["algo"]], *(text for text in shown if text != "-")])
         groups.setdefault(label, []).append(out / "tb" / row["run_id"])
     channel = {"radio_map": "radio-map training", "rayleigh": "Rayleigh training"}.get(common.get("channel", "-"), "")
@@ -226,6 +281,16 @@ def plot_success(frame: pd.DataFrame, out: Path, path: Path) -> Any:
         title=f"The paper's task: training success per episode\n{channel}".rstrip(),
         band_note=True,
     )
+
+
+def _label_text(column: str, value: Any) -> str:
+    """:return: a configuration value as a figure's legend shows it: the downlink in capitals"""
+    return _shown_text(column, value).upper() if column == "multiple_access" else _shown_text(column, value)
+
+
+def _shown_text(column: str, value: Any) -> str:
+    """:return: a configuration value as the tables show it: overrides shortened (:func:`_short_overrides`)"""
+    return _short_overrides(value) if column == "overrides" else _text(value)
 
 
 def _text(value: Any) -> str:
@@ -275,7 +340,7 @@ def main() -> None:
     print("every run: " + ", ".join(f"{column} {value}" for column, value in common.items()) + "\n")
     shown = frame.drop(columns=["run_id", *hidden]).copy()
     for column in configuration:
-        shown[column] = shown[column].map(_text)
+        shown[column] = [_shown_text(column, value) for value in shown[column]]
     for column in ("train_success", "train_success_first100", "train_success_last100", "test_success"):
         shown[column] = (100 * shown[column]).round(1)
     print(shown.to_string(index=False, float_format=lambda value: f"{value:.1f}"))
@@ -283,6 +348,8 @@ def main() -> None:
     paired_title = "paired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences); success in points"
     _print_table(paired_title, paired_rows(frame), configuration)
     _print_table("NOMA - OMA, paired by seed, per algorithm; success in points", access_rows(frame), configuration)
+    override_title = "runs of other overrides against each other, paired by seed; success in points"
+    _print_table(override_title, override_rows(frame), configuration)
 
 
 def _print_table(title: str, rows: pd.DataFrame, configuration: list[str]) -> None:
@@ -292,7 +359,9 @@ def _print_table(title: str, rows: pd.DataFrame, configuration: list[str]) -> No
         return
     hidden = [column for column in CONFIGURATION if column not in configuration and column in rows.columns]
     shown = rows.drop(columns=hidden)
-    text = {column: shown[column].map(_text) for column in configuration if column in shown.columns}
+    text = {
+        column: [_shown_text(column, value) for value in shown[column]] for column in configuration if column in shown.columns
+    }
     print(f"\n{title}")
     print(shown.assign(**text).to_string(index=False))
 

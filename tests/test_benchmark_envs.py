@@ -46,11 +46,11 @@ def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
     assert (tmp_path / "success.png").stat().st_size > 0
 
 
-def _fake_paper_task_run(out, algo, access, seed, successes, mqi):
+def _fake_paper_task_run(out, algo, access, seed, successes, mqi, overrides=(("gamma", "0.95"),)):
     """A finished ``sb3-dtdpg train`` run of the paper's task in ``out``: its result and its success per episode."""
     from stable_baselines3.common.logger import configure
 
-    run_id = f"{algo}_{access}_s{seed}_hp1"
+    run_id = f"{algo}_{access}_s{seed}_hp{len(overrides)}"
     logger = configure(str(out / "tb" / run_id), ["tensorboard"])
     for episode, success in enumerate(successes, start=1):
         logger.record("mission/success", float(success))
@@ -58,7 +58,8 @@ def _fake_paper_task_run(out, algo, access, seed, successes, mqi):
         logger.dump(episode)
     logger.close()
     (out / "runs" / run_id).mkdir(parents=True)
-    spec = {"algo": algo, "hyperparams": "paper", "overrides": [["gamma", "0.95"]], "multiple_access": access, "seed": seed}
+    spec = {"algo": algo, "hyperparams": "paper", "overrides": [list(item) for item in overrides], "multiple_access": access}
+    spec["seed"] = seed
     result = {"spec": spec, "eval": {"summary": {"success_rate": 1.0, "mqi": mqi}}, "train": {"wall_s": 2.0}}
     (out / "runs" / run_id / "result.json").write_text(json.dumps(result))
 
@@ -91,6 +92,29 @@ def test_paper_task_runs_joins_earlier_tables_and_pairs_noma_with_oma(tmp_path, 
     with pytest.raises(SystemExit) as exit_info:
         paper_task_runs.main()
     assert exit_info.value.code == 2 and "not a table of this script (no columns preset, " in capsys.readouterr().err
+
+
+def test_paper_task_runs_pairs_an_ablation_s_runs_with_each_algorithm_of_its_set_up(tmp_path):
+    paper_task_runs = load_script("paper_task_runs")
+    phases = "[{'name': 'a', 'reward_phase': 'combined', 'n_episodes': 2}, {'name': 'b', 'reward_phase': 'combined'}]"
+    for seed in (0, 1):
+        _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [1, 1, 1, 0], 850.0)
+        _fake_paper_task_run(tmp_path, "ddpg", "noma", seed, [0, 0, 0, 0], 800.0)
+        ablation = (("gamma", "0.95"), ("phases", phases))
+        _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [0, 1, 0, seed], 820.0 + seed, overrides=ablation)
+    rows = paper_task_runs.run_rows(tmp_path)
+    assert list(paper_task_runs.paired_rows(rows)["n"]) == [2]  # DT-DPG - DDPG in the set-up without an ablation's
+    ablation = paper_task_runs.override_rows(rows)
+    assert list(ablation["contrast"]) == [
+        "dtdpg gamma:0.95 phases:combined/combined - dtdpg gamma:0.95",
+        "dtdpg gamma:0.95 phases:combined/combined - ddpg gamma:0.95",
+    ]
+    assert list(ablation["n"]) == [2, 2] and list(ablation["multiple_access"]) == ["noma", "noma"]
+    assert [text.split(" ± ")[0] for text in ablation["train_success"]] == ["-37.5", "37.5"]
+    assert [text.split(" ± ")[0] for text in ablation["test_mqi"]] == ["-29.5", "20.5"]
+    figure = paper_task_runs.plot_success(rows, tmp_path, tmp_path / "success.png")
+    labels = {line.get_label() for line in figure.axes[0].get_lines() if "seed" in line.get_label()}
+    assert "DT-DPG paper gamma:0.95 phases:combined/combined NOMA (2 seeds)" in labels
 
 
 def test_paper_task_runs_counts_timestep_runs_stored_with_the_unused_episodes_as_one_configuration(tmp_path):
