@@ -73,6 +73,14 @@ def test_a_mismatched_env_is_refused_with_the_settings_to_use(saved_dtdpg, kwarg
         model.set_env(small_env(**kwargs))
 
 
+def test_set_env_refuses_a_mismatched_env_for_a_model_never_saved():
+    model = DTDPG("MlpPolicy", small_env(observation="goal"), buffer_size=100, seed=0)
+    with pytest.raises(EnvSettingsMismatch, match="multiple_access='noma'"):
+        model.set_env(small_env(observation="goal", multiple_access="oma"))
+    assert model.get_env().get_attr("multiple_access") == ["noma"]  # kept
+    model.set_env(small_env(observation="goal", channel="rayleigh"))  # the channel is not checked
+
+
 def test_a_matching_env_loads_also_with_another_test_channel(saved_dtdpg):
     model = DTDPG.load(saved_dtdpg, env=small_env(observation="goal", channel="rayleigh"))
     assert model.env_settings["channel"] == "radio_map"  # recorded, not checked: test with fading

@@ -342,7 +342,7 @@ class DTDPG(LeanStep, DDPG):
 
     # The env settings the model was trained with travel in the zip (sb3_dtdpg.env_settings): a mismatched env
     # is refused at load/set_env with the settings to use, instead of a bare space mismatch (or, NOMA vs OMA,
-    # nothing at all).
+    # nothing at all). set_env compares with the model's current env, a model never saved included.
     def save(self, path: Any, exclude: Iterable[str] | None = None, include: Iterable[str] | None = None) -> None:
         env_settings.record(self)
         super().save(path, exclude=exclude, include=include)
@@ -358,7 +358,7 @@ class DTDPG(LeanStep, DDPG):
         return super()._setup_learn(total_timesteps, callback, *args, **kwargs)
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
-        env_settings.check_settings(getattr(self, "env_settings", None), env)
+        env_settings.check_settings(env_settings.trained_settings(self), env)
         super().set_env(env, force_reset=force_reset)
 
     def _excluded_save_params(self) -> list[str]:
