@@ -29,6 +29,9 @@ gone, to those of the folder: the OMA runs of the same set-up beside the NOMA on
         --csv docs/csv/paper_task_gamma.csv --figure docs/figures/paper_task_gamma_oma_success.png
 
 A run in both is the folder's. The figure draws the folder's runs only (a table holds no per-episode success).
+``--with-csv`` reads the per-run table of ``reproduce``'s paper-task experiment too (``docs/csv/paper_task_runs.csv``):
+its runs count as ``train`` runs of the same preset without overrides, so that an ablation trained with ``train``
+pairs with them (the tuned set without DT-DPG's curriculum, docs/RESULTS.md).
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import inspect
 import io
 import json
 import math
@@ -46,7 +50,7 @@ from typing import Any
 import pandas as pd
 
 from sb3_dtdpg.evaluation import format_ci, mean_ci
-from sb3_dtdpg.experiments.paper_task import training_success
+from sb3_dtdpg.experiments.paper_task import ENV_ID, training_success
 from sb3_dtdpg.experiments.specs import RunSpec
 from sb3_dtdpg.experiments.tables import paired_differences
 
@@ -85,9 +89,19 @@ def _spec_value(spec: dict[str, Any], field: str) -> Any:
     if field == "episodes" and spec.get("timesteps") is not None:
         return None
     value = spec.get(field, _DEFAULTS.get(field))
+    if field == "scenario":
+        return _scenario(value)
     if field == "overrides":
         return " ".join(f"{name}:{text}" for name, text in value or [])
     return None if value is dataclasses.MISSING else value
+
+
+def _scenario(name: Any) -> Any:
+    """:return: the scenario of a run, None for the env's default room (``mall``), given by name or not"""
+    from noma_radiomap import NomaRadioMapEnv
+
+    default = inspect.signature(NomaRadioMapEnv).parameters["scenario"].default
+    return None if name == default else name
 
 
 def run_rows(out: Path) -> pd.DataFrame:
@@ -129,7 +143,8 @@ def _sorted(frame: pd.DataFrame) -> pd.DataFrame:
 def with_tables(frame: pd.DataFrame, tables: list[Path]) -> pd.DataFrame:
     """
     :param frame: output of :func:`run_rows`
-    :param tables: per-run tables written by ``--csv`` (the columns of :func:`run_rows`)
+    :param tables: per-run tables written by ``--csv`` (the columns of :func:`run_rows`), or by ``reproduce``'s
+        paper-task experiment (:func:`reproduce_runs`)
     :return: the runs of ``frame`` and those of the tables that ``frame`` has not (by run id), sorted as
         :func:`run_rows` sorts; every value as read from a CSV file, so that a value missing in one source and in
         another compares equal
@@ -139,12 +154,60 @@ def with_tables(frame: pd.DataFrame, tables: list[Path]) -> pd.DataFrame:
     read = []
     for table in tables:
         rows = pd.read_csv(table)
+        if set(_REPRODUCE_COLUMNS) <= set(rows.columns):
+            rows = _as_read(reproduce_runs(rows))
         missing = [column for column in columns if column not in rows.columns]
         if missing:
             raise ValueError(f"--with-csv {table}: not a table of this script (no columns {', '.join(missing)})")
         read.append(rows[columns])
-    own = pd.read_csv(io.StringIO(frame.to_csv(index=False))) if not frame.empty else pd.DataFrame(columns=columns)
+    own = _as_read(frame) if not frame.empty else pd.DataFrame(columns=columns)
     return _sorted(pd.concat([own, *read], ignore_index=True).drop_duplicates("run_id"))  # the first: the folder's
+
+
+def _as_read(frame: pd.DataFrame) -> pd.DataFrame:
+    """:return: ``frame`` as written to a CSV file and read back"""
+    return pd.read_csv(io.StringIO(frame.to_csv(index=False)))
+
+
+#: The columns of ``reproduce``'s per-run paper-task table that :func:`reproduce_runs` reads
+_REPRODUCE_COLUMNS = {
+    "group": "run_id",
+    "algo": "algo",
+    "preset": "preset",
+    "learning_rate": "learning_rate",
+    "multiple_access": "multiple_access",
+    "scenario": "scenario",
+    "training": "channel",
+    "episodes": "budget_episodes",
+    "seed": "seed",
+    "train_episodes": "episodes",
+    "train_success": "train_success",
+    "train_success_first": "train_success_first100",
+    "train_success_last": "train_success_last100",
+    "success_rate": "test_success",
+    "mqi": "test_mqi",
+    "train_wall_s": "train_wall_s",
+}
+
+
+def reproduce_runs(rows: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param rows: the per-run table of ``sb3-dtdpg reproduce``'s paper-task experiment (``paper_task_runs.csv``, e.g.
+        ``docs/csv/paper_task_runs.csv``)
+    :return: its runs as :func:`run_rows` gives runs of ``sb3-dtdpg train`` with the same settings: no overrides,
+        the paper's task and state, the default test; the run id ``<group>_s<seed>``. Its tag, which names
+        ``reproduce``'s experiment, is left out, so that ``train`` runs of the set-up pair with these.
+    """
+    runs = rows[list(_REPRODUCE_COLUMNS)].rename(columns=_REPRODUCE_COLUMNS)
+    runs["run_id"] = [f"{group}_s{seed}" for group, seed in zip(runs["run_id"], runs["seed"], strict=True)]
+    runs["multiple_access"] = runs["multiple_access"].str.lower()
+    runs["scenario"] = runs["scenario"].map(_scenario)
+    defaults = {column: _spec_value({}, field) for column, field in CONFIGURATION_FIELDS.items()}
+    fixed = {"overrides": "", "env_id": ENV_ID, "observation": "paper", "timesteps": None, "tag": ""}
+    for column in CONFIGURATION:
+        if column not in runs.columns:
+            runs[column] = fixed.get(column, defaults[column])
+    return runs.rename(columns={"train_wall_s": "wall_s"})
 
 
 def summary_rows(frame: pd.DataFrame) -> pd.DataFrame:
@@ -183,25 +246,37 @@ def access_rows(frame: pd.DataFrame) -> pd.DataFrame:
 def override_rows(frame: pd.DataFrame) -> pd.DataFrame:
     """
     :param frame: output of :func:`run_rows`
-    :return: runs that differ in their overrides (an ablation of a set-up) against each other, paired by seed within
-        the rest of their configuration: each algorithm of the one with the longer overrides text minus each
-        algorithm of the other, ``n`` (pairs) and ``<difference> ± <95 % CI>``; empty where no configuration has
-        runs of two overrides
+    :return: the ablations of a set-up: runs whose overrides are another set-up's and one more (e.g. DT-DPG with
+        ``gamma:0.95 phases:[...]`` beside runs with ``gamma:0.95``) minus the set-up's runs of the same algorithm,
+        and, where the ablation trains one algorithm only, of the set-up's other algorithms too (DT-DPG without its
+        curriculum against DDPG, which trains on the same reward); paired by seed within the rest of the
+        configuration: ``n`` (pairs) and ``<difference> ± <95 % CI>``; empty where there are none
     """
     by = [column for column in CONFIGURATION if column != "overrides"]
     variants = frame.assign(
         variant=[f"{algo} {_text(text)}" for algo, text in zip(frame["algo"], frame["overrides"], strict=True)]
     )
     kinds = variants[["algo", "overrides", "variant"]].drop_duplicates("variant")
-    kinds = kinds.assign(length=kinds["overrides"].map(lambda text: len(_text(text))))
+    items = {variant: _override_items(text) for variant, text in zip(kinds["variant"], kinds["overrides"], strict=True)}
+    algos = variants.groupby("overrides", dropna=False)["algo"].nunique()
     tables = []
     for _, first in kinds.iterrows():
         for _, second in kinds.iterrows():
-            if first["length"] > second["length"]:
+            ablation, base = items[first["variant"]], items[second["variant"]]
+            if (
+                base < ablation
+                and len(ablation - base) == 1
+                and (first["algo"] == second["algo"] or algos[first["overrides"]] == 1)
+            ):
                 rows = _paired(variants, "variant", (first["variant"], second["variant"]), by)
                 tables.append(rows.assign(contrast=f"{_variant_label(first)} - {_variant_label(second)}"))
     rows = [table for table in tables if not table.empty]
     return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=[*by, "contrast", "n", *METRICS])
+
+
+def _override_items(text: Any) -> frozenset[str]:
+    """:return: the ``name:value`` items of an overrides text (none for ``-``)"""
+    return frozenset(item for item in _OVERRIDE_START.split(_text(text)) if item != "-")
 
 
 def _variant_label(kind: pd.Series) -> str:
@@ -314,7 +389,8 @@ def main() -> None:
         type=Path,
         nargs="+",
         default=[],
-        help="per-run tables written by --csv before: their runs join the folder's (not the figure)",
+        help="per-run tables written by --csv before, or by reproduce's paper-task experiment: their runs join the "
+        "folder's (not the figure)",
     )
     args = parser.parse_args()
     if not (args.out / "runs").is_dir():
@@ -348,7 +424,7 @@ def main() -> None:
     paired_title = "paired by seed: mean difference ± 95 % CI (t-interval over the per-seed differences); success in points"
     _print_table(paired_title, paired_rows(frame), configuration)
     _print_table("NOMA - OMA, paired by seed, per algorithm; success in points", access_rows(frame), configuration)
-    override_title = "runs of other overrides against each other, paired by seed; success in points"
+    override_title = "ablations: runs with one more override minus those of the set-up, paired by seed; success in points"
     _print_table(override_title, override_rows(frame), configuration)
 
 

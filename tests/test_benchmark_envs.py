@@ -59,7 +59,7 @@ def _fake_paper_task_run(out, algo, access, seed, successes, mqi, overrides=(("g
     logger.close()
     (out / "runs" / run_id).mkdir(parents=True)
     spec = {"algo": algo, "hyperparams": "paper", "overrides": [list(item) for item in overrides], "multiple_access": access}
-    spec["seed"] = seed
+    spec.update(seed=seed, episodes=len(successes), env_id="NomaRadioMapPaper-v0", observation="paper")
     result = {"spec": spec, "eval": {"summary": {"success_rate": 1.0, "mqi": mqi}}, "train": {"wall_s": 2.0}}
     (out / "runs" / run_id / "result.json").write_text(json.dumps(result))
 
@@ -115,6 +115,30 @@ def test_paper_task_runs_pairs_an_ablation_s_runs_with_each_algorithm_of_its_set
     figure = paper_task_runs.plot_success(rows, tmp_path, tmp_path / "success.png")
     labels = {line.get_label() for line in figure.axes[0].get_lines() if "seed" in line.get_label()}
     assert "DT-DPG paper gamma:0.95 phases:combined/combined NOMA (2 seeds)" in labels
+
+
+def test_paper_task_runs_reads_reproduce_s_paper_task_runs_as_train_runs_of_their_preset(tmp_path):
+    paper_task_runs = load_script("paper_task_runs")
+    phases = "[{'name': 'a', 'reward_phase': 'combined'}]"
+    for seed in (0, 4):
+        _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [1, 0], 810.0, overrides=(("phases", phases),))
+    header = "group,preset,algorithm,algo,multiple_access,training,episodes,learning_rate,tag,seed,success_rate,mqi,"
+    header += "train_wall_s,train_success,train_success_first,train_success_last,train_episodes,scenario,eval_episodes\n"
+    rows = [
+        f"{algo}_noma_paper_task_500,paper,X,{algo},NOMA,radio_map,2,,paper_task_500,{seed},1.0,{mqi},9.0,{success},"
+        f"{success},{success},2,{scenario},{20 if scenario else ''}"
+        for algo, success, mqi in (("dtdpg", 1.0, 850.0), ("ddpg", 0.25, 830.0))
+        for seed, scenario in ((0, ""), (4, "mall"))  # rows of a later job name the default room
+    ]
+    (tmp_path / "reproduce.csv").write_text(header + "\n".join(rows) + "\n")
+    runs = paper_task_runs.with_tables(paper_task_runs.run_rows(tmp_path), [tmp_path / "reproduce.csv"])
+    assert len(runs) == 6 and set(runs["run_id"]) >= {"dtdpg_noma_paper_task_500_s0", "ddpg_noma_paper_task_500_s4"}
+    assert list(paper_task_runs.summary_rows(runs)["n"]) == [2, 2, 2]  # the named room is the default one
+    ablation = paper_task_runs.override_rows(runs)
+    assert list(ablation["contrast"]) == ["dtdpg phases:combined - dtdpg", "dtdpg phases:combined - ddpg"]
+    assert list(ablation["n"]) == [2, 2]
+    assert [text.split(" ± ")[0] for text in ablation["train_success"]] == ["-50.0", "25.0"]
+    assert [text.split(" ± ")[0] for text in ablation["test_mqi"]] == ["-40.0", "-20.0"]
 
 
 def test_paper_task_runs_counts_timestep_runs_stored_with_the_unused_episodes_as_one_configuration(tmp_path):
