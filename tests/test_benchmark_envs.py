@@ -120,8 +120,10 @@ def test_paper_task_runs_pairs_an_ablation_s_runs_with_each_algorithm_of_its_set
 def test_paper_task_runs_reads_reproduce_s_paper_task_runs_as_train_runs_of_their_preset(tmp_path):
     paper_task_runs = load_script("paper_task_runs")
     phases = "[{'name': 'a', 'reward_phase': 'combined'}]"
+    no_norm = (("phases", phases), ("policy_kwargs", "dict(actor_norm='none')"))
     for seed in (0, 4):
         _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [1, 0], 810.0, overrides=(("phases", phases),))
+        _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [0, 0], 800.0, overrides=no_norm)
     header = "group,preset,algorithm,algo,multiple_access,training,episodes,learning_rate,tag,seed,success_rate,mqi,"
     header += "train_wall_s,train_success,train_success_first,train_success_last,train_episodes,scenario,eval_episodes\n"
     rows = [
@@ -132,13 +134,24 @@ def test_paper_task_runs_reads_reproduce_s_paper_task_runs_as_train_runs_of_thei
     ]
     (tmp_path / "reproduce.csv").write_text(header + "\n".join(rows) + "\n")
     runs = paper_task_runs.with_tables(paper_task_runs.run_rows(tmp_path), [tmp_path / "reproduce.csv"])
-    assert len(runs) == 6 and set(runs["run_id"]) >= {"dtdpg_noma_paper_task_500_s0", "ddpg_noma_paper_task_500_s4"}
-    assert list(paper_task_runs.summary_rows(runs)["n"]) == [2, 2, 2]  # the named room is the default one
-    ablation = paper_task_runs.override_rows(runs)
-    assert list(ablation["contrast"]) == ["dtdpg phases:combined - dtdpg", "dtdpg phases:combined - ddpg"]
-    assert list(ablation["n"]) == [2, 2]
-    assert [text.split(" ± ")[0] for text in ablation["train_success"]] == ["-50.0", "25.0"]
-    assert [text.split(" ± ")[0] for text in ablation["test_mqi"]] == ["-40.0", "-20.0"]
+    assert len(runs) == 8 and set(runs["run_id"]) >= {"dtdpg_noma_paper_task_500_s0", "ddpg_noma_paper_task_500_s4"}
+    assert list(paper_task_runs.summary_rows(runs)["n"]) == [2, 2, 2, 2]  # the named room is the default one
+    ablation = paper_task_runs.override_rows(runs).set_index("contrast")
+    no_norm = "dtdpg phases:combined policy_kwargs:dict(actor_norm='none')"
+    assert sorted(ablation.index) == sorted(
+        [
+            "dtdpg phases:combined - dtdpg",
+            "dtdpg phases:combined - ddpg",
+            f"{no_norm} - dtdpg phases:combined",  # one override more
+            f"{no_norm} - dtdpg",  # and two
+            f"{no_norm} - ddpg",
+        ]
+    )
+    assert set(ablation["n"]) == {2}
+    assert ablation.loc["dtdpg phases:combined - dtdpg", "train_success"].startswith("-50.0 ± ")
+    assert ablation.loc["dtdpg phases:combined - ddpg", "train_success"].startswith("25.0 ± ")
+    assert ablation.loc["dtdpg phases:combined - ddpg", "test_mqi"].startswith("-20.0 ± ")
+    assert ablation.loc[f"{no_norm} - ddpg", "train_success"].startswith("-25.0 ± ")
 
 
 def test_paper_task_runs_counts_timestep_runs_stored_with_the_unused_episodes_as_one_configuration(tmp_path):
