@@ -44,6 +44,7 @@ import io
 import json
 import math
 import re
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -342,6 +343,7 @@ def plot_success(frame: pd.DataFrame, out: Path, path: Path) -> Any:
     for _, row in frame.iterrows():
         shown = [_label_text(column, row[column]) for column in configuration]
         label = " ".join([tables.ALGO_LABELS[row["algo"]], *(text for text in shown if text != "-")])
+        label = textwrap.fill(label, width=40, break_long_words=False)  # two legend columns fit the figure's width
         groups.setdefault(label, []).append(out / "tb" / row["run_id"])
     channel = {"radio_map": "radio-map training", "rayleigh": "Rayleigh training"}.get(common.get("channel", "-"), "")
     return plots.plot_learning_curves(

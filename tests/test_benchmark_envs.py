@@ -113,8 +113,8 @@ def test_paper_task_runs_pairs_an_ablation_s_runs_with_each_algorithm_of_its_set
     assert [text.split(" ± ")[0] for text in ablation["train_success"]] == ["-37.5", "37.5"]
     assert [text.split(" ± ")[0] for text in ablation["test_mqi"]] == ["-29.5", "20.5"]
     figure = paper_task_runs.plot_success(rows, tmp_path, tmp_path / "success.png")
-    labels = {line.get_label() for line in figure.axes[0].get_lines() if "seed" in line.get_label()}
-    assert "DT-DPG paper gamma:0.95 phases:combined/combined NOMA (2 seeds)" in labels
+    labels = {line.get_label().replace("\n", " ") for line in figure.axes[0].get_lines() if "seed" in line.get_label()}
+    assert "DT-DPG paper gamma:0.95 phases:combined/combined NOMA (2 seeds)" in labels  # on two lines
 
 
 def test_paper_task_runs_reads_reproduce_s_paper_task_runs_as_train_runs_of_their_preset(tmp_path):
