@@ -86,7 +86,8 @@ _DEFAULTS = {field.name: field.default for field in dataclasses.fields(RunSpec)}
 
 def _spec_value(spec: dict[str, Any], field: str) -> Any:
     """:return: a field of a stored run spec, RunSpec's default where a result of an earlier version lacks it (no
-    episodes count for a run of a budget in timesteps: runs stored with the CLI's unused ``--episodes`` are its)"""
+    episodes count for a run of a budget in timesteps: runs stored with the CLI's unused ``--episodes`` are its; the
+    default room, named or not, as None)"""
     if field == "episodes" and spec.get("timesteps") is not None:
         return None
     value = spec.get(field, _DEFAULTS.get(field))
@@ -277,7 +278,8 @@ def _override_items(text: Any) -> frozenset[str]:
 
 
 def _variant_label(kind: pd.Series) -> str:
-    """:return: e.g. ``dtdpg gamma:0.95 phases:[{'name'...``, the algorithm and its overrides (:func:`_short_overrides`)"""
+    """:return: e.g. ``dtdpg gamma:0.95 phases:combined/combined``, the algorithm and its overrides
+    (:func:`_short_overrides`)"""
     overrides = _short_overrides(kind["overrides"])
     return kind["algo"] if overrides == "-" else f"{kind['algo']} {overrides}"
 
