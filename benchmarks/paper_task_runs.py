@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
-import inspect
 import io
 import json
 import math
@@ -92,18 +91,20 @@ def _spec_value(spec: dict[str, Any], field: str) -> Any:
         return None
     value = spec.get(field, _DEFAULTS.get(field))
     if field == "scenario":
-        return _scenario(value)
+        return _scenario(value, spec.get("env_id", _DEFAULTS["env_id"]))
     if field == "overrides":
         return " ".join(f"{name}:{text}" for name, text in value or [])
     return None if value is dataclasses.MISSING else value
 
 
-def _scenario(name: Any) -> Any:
-    """:return: the scenario of a run, None for the env's default room (``mall``), given by name or not"""
-    from noma_radiomap import NomaRadioMapEnv
+def _scenario(name: Any, env_id: str) -> Any:
+    """:return: the scenario of a run, None for its env id's default room, given by name or not (the default as
+    :func:`sb3_dtdpg.experiments.specs.run_identity` reads it: the registered ``scenario``, else ``mall``)"""
+    import gymnasium as gym
 
-    default = inspect.signature(NomaRadioMapEnv).parameters["scenario"].default
-    return None if name == default else name
+    import noma_radiomap  # noqa: F401  (registers the env ids)
+
+    return None if name == gym.spec(env_id).kwargs.get("scenario", "mall") else name
 
 
 def run_rows(out: Path) -> pd.DataFrame:
@@ -203,7 +204,7 @@ def reproduce_runs(rows: pd.DataFrame) -> pd.DataFrame:
     runs = rows[list(_REPRODUCE_COLUMNS)].rename(columns=_REPRODUCE_COLUMNS)
     runs["run_id"] = [f"{group}_s{seed}" for group, seed in zip(runs["run_id"], runs["seed"], strict=True)]
     runs["multiple_access"] = runs["multiple_access"].str.lower()
-    runs["scenario"] = runs["scenario"].map(_scenario)
+    runs["scenario"] = [_scenario(name, ENV_ID) for name in runs["scenario"]]
     defaults = {column: _spec_value({}, field) for column, field in CONFIGURATION_FIELDS.items()}
     fixed = {"overrides": "", "env_id": ENV_ID, "observation": "paper", "timesteps": None, "tag": ""}
     for column in CONFIGURATION:
