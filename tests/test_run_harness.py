@@ -372,6 +372,19 @@ def test_steps_per_s_of_a_resumed_run_counts_the_steps_it_trained(tmp_path, monk
     assert train["steps_per_s"] == pytest.approx((train["timesteps"] - checkpoint["timesteps"]) / train["wall_s"])
 
 
+def test_a_checkpoint_records_its_versions_and_resuming_one_of_others_is_warned_about(tmp_path, monkeypatch):
+    from sb3_dtdpg.experiments.provenance import OtherVersionsWarning, made_with
+
+    _, checkpoint = _interrupt_after_first_checkpoint(SPEC, tmp_path, monkeypatch)
+    assert checkpoint["made_with"] == made_with()
+    pointer = tmp_path / "runs" / SPEC.run_id / "checkpoint.json"
+    pointer.write_text(json.dumps(dict(checkpoint, made_with=dict(checkpoint["made_with"], torch="2.4.0"))))
+    with pytest.warns(OtherVersionsWarning, match=r"1 of 1 stored runs .*torch 2\.4\.0.*they are resumed"):
+        result = run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)
+    assert result["train"]["resumed_at_episode"] == 1
+    assert result["made_with"] == made_with()  # the versions that finished the training
+
+
 @pytest.mark.parametrize("damage", ["truncated replay buffer", "checkpoint folder removed", "result.json"])
 def test_a_damaged_run_record_is_one_error_line_of_train(tmp_path, monkeypatch, capsys, damage):
     monkeypatch.chdir(tmp_path)  # the default TensorBoard folder is relative

@@ -36,6 +36,7 @@ from sb3_dtdpg import env_settings
 from sb3_dtdpg.common.files import atomic_write, json_default, remove_temp_files, write_json
 from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS, Budget, check_budget, get_budget
 from sb3_dtdpg.experiments.pool import RunReport, RunsFailedError, run_in_pool, worker_pool
+from sb3_dtdpg.experiments.provenance import made_with, warn_other_versions
 from sb3_dtdpg.experiments.run_callbacks import (
     EpisodeCounter,
     EpisodeReturnLogger,
@@ -392,12 +393,15 @@ def run_one(
     if resume:
         finished = load_result(out, spec, identity)
         if finished is not None:
+            warn_other_versions({spec.run_id: finished}, out)
             return finished
         record = read_trained(run_dir, identity)
         if record is not None:
+            warn_other_versions({spec.run_id: record}, out, reused="evaluated")
             trained = _load_trained(spec, run_dir, verbose), record
         else:
             checkpoint = read_checkpoint(run_dir, identity)
+            warn_other_versions({spec.run_id: checkpoint}, out, reused="resumed")
     elif retest:
         trained = _uninterrupted_training(run_dir, identity, spec, verbose)
     if trained is not None:  # interrupted in its evaluations: the trained model is evaluated, not trained again
@@ -461,6 +465,7 @@ def _train_and_record(
         "reward_phases": {"trained": trained_on, "evaluated": final_reward_phase},
         "curriculum_state": curriculum,
         "before_transfer_models": [path.name for path in _before_transfer_models(run_dir)],
+        "made_with": made_with(),
     }
     # What the result keeps of the training, so that a run interrupted in its evaluations resumes with them
     write_json(run_dir / TRAINED_RECORD, trained, indent=1)
@@ -519,6 +524,7 @@ def _record_result(spec: RunSpec, out: Path, model: Any, trained: dict[str, Any]
         "reward_phases": reward_phases,
         **_evaluations(spec, model, run_dir, reward_phases["trained"], reward_phases["evaluated"], n_trajectories),
         "curriculum_state": trained["curriculum_state"],
+        "made_with": trained.get("made_with"),  # the training's (a record of an older version has none)
     }
     write_json(result_path(out, spec), result, indent=1)
     clear_checkpoints(run_dir)  # the result supersedes them (and the record of the training)

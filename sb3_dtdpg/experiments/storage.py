@@ -21,6 +21,7 @@ from stable_baselines3.common import logger as sb3_logger
 
 from sb3_dtdpg.common.checks import shortened
 from sb3_dtdpg.common.files import atomic_write, write_json
+from sb3_dtdpg.experiments.provenance import made_with, warn_other_versions
 from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identity, run_identity
 
 __all__ = [
@@ -154,6 +155,7 @@ def load_results(
         except (RunMismatchError, DamagedRecordError) as error:
             problems.append((spec, error))
     if not problems:
+        warn_other_versions(results, out)
         return results
     first = problems[0][1]
     if len(problems) == 1:
@@ -423,6 +425,7 @@ def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episode
         "episodes": episodes,
         "timesteps": int(model.num_timesteps),
         "folder": str(folder.relative_to(run_dir)),
+        "made_with": made_with(),
     }
     write_json(run_dir / "checkpoint.json", pointer, indent=1)
     for other in (run_dir / "checkpoints").iterdir():
