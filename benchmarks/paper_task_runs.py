@@ -18,9 +18,10 @@ algorithm, the mean over its seeds with a 95 % CI band. Below the per-run table:
 (t-interval over seeds), DT-DPG - DDPG paired by seed; where runs of both downlinks are there, NOMA - OMA per
 algorithm paired by seed; where runs add overrides to another set-up's (an ablation: DT-DPG with ``phases:[...]``
 beside the runs without), each algorithm of the ablation against the set-up's, paired by seed (a curriculum shows as
-its reward phases, ``phases:combined/combined``). A configuration is every setting of a run but its
-algorithm and seed (:data:`CONFIGURATION_FIELDS`: preset, overrides, learning rate, multiple access, env, scenario,
-channel, training episodes, ...); the tables show those that differ between the runs, the others are printed once.
+its reward phases, ``phases:combined/combined``; a variant trained with ``train --tag`` as its tag). A configuration
+is every setting of a run but its algorithm and seed (:data:`CONFIGURATION_FIELDS`: preset, overrides, learning
+rate, multiple access, env, scenario, channel, training episodes, ...); the tables show those that differ between
+the runs, the others are printed once.
 
 ``--with-csv`` adds the runs of per-run tables this script wrote before (``--csv``), e.g. of runs whose folders are
 gone, to those of the folder: the OMA runs of the same set-up beside the NOMA ones of ``docs/csv/``::
@@ -255,11 +256,14 @@ def override_rows(frame: pd.DataFrame) -> pd.DataFrame:
         curriculum against DDPG, which trains on the same reward); paired by seed within the rest of the
         configuration: ``n`` (pairs) and ``<difference> ± <95 % CI>``; empty where there are none
     """
-    by = [column for column in CONFIGURATION if column != "overrides"]
+    by = [column for column in CONFIGURATION if column not in ("overrides", "tag")]
     variants = frame.assign(
-        variant=[f"{algo} {_text(text)}" for algo, text in zip(frame["algo"], frame["overrides"], strict=True)]
+        variant=[
+            f"{algo} {_text(tag)} {_text(text)}"
+            for algo, tag, text in zip(frame["algo"], frame["tag"], frame["overrides"], strict=True)
+        ]
     )
-    kinds = variants[["algo", "overrides", "variant"]].drop_duplicates("variant")
+    kinds = variants[["algo", "tag", "overrides", "variant"]].drop_duplicates("variant")
     items = {variant: _override_items(text) for variant, text in zip(kinds["variant"], kinds["overrides"], strict=True)}
     algos = variants.groupby("overrides", dropna=False)["algo"].nunique()
     tables = []
@@ -280,9 +284,11 @@ def _override_items(text: Any) -> frozenset[str]:
 
 def _variant_label(kind: pd.Series) -> str:
     """:return: e.g. ``dtdpg gamma:0.95 phases:combined/combined``, the algorithm and its overrides
-    (:func:`_short_overrides`)"""
-    overrides = _short_overrides(kind["overrides"])
-    return kind["algo"] if overrides == "-" else f"{kind['algo']} {overrides}"
+    (:func:`_short_overrides`), or the algorithm and its tag (``train --tag``: ``dtdpg no_curriculum``)"""
+    name = _text(kind["tag"])
+    if name == "-":
+        name = _short_overrides(kind["overrides"])
+    return kind["algo"] if name == "-" else f"{kind['algo']} {name}"
 
 
 #: Where one ``name:value`` of an overrides text begins (values such as a list of phases hold spaces)
@@ -344,7 +350,8 @@ def plot_success(frame: pd.DataFrame, out: Path, path: Path) -> Any:
     configuration, common = shown_configuration(frame)
     groups: dict[str, list[Path]] = {}
     for _, row in frame.iterrows():
-        shown = [_label_text(column, row[column]) for column in configuration]
+        tagged = _text(row["tag"]) != "-"  # a tag names the variant (``train --tag``): its overrides are left out
+        shown = [_label_text(column, row[column]) for column in configuration if not (tagged and column == "overrides")]
         label = " ".join([tables.ALGO_LABELS[row["algo"]], *(text for text in shown if text != "-")])
         label = textwrap.fill(label, width=40, break_long_words=False)  # two legend columns fit the figure's width
         groups.setdefault(label, []).append(out / "tb" / row["run_id"])

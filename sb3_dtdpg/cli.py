@@ -272,6 +272,7 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
         timesteps=args.timesteps,
         observation=args.observation,
         overrides=tuple((name, override_text(value)) for name, value in args.overrides.items()),
+        tag=args.tag,
     )
     out = Path(args.out)
     run_dir = out / "runs" / spec.run_id
@@ -327,12 +328,12 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
     from sb3_dtdpg.common.files import atomic_write, safe_name, unused_path
     from sb3_dtdpg.experiments.runs import EpisodeReturnLogger
 
-    run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}"
+    run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}" + (f"_{args.tag}" if args.tag else "")
     out = Path(args.out)
     if (out / f"{run_name}.zip").exists():  # runs on other envs are not resumed: a new one would replace it
         args.error(
             f"--out {out} holds {run_name}.zip, the model of an earlier train of {args.algo} on {args.env} with seed "
-            f"{args.seed}; move it, or use another --out or --seed"
+            f"{args.seed}; move it, or use another --out, --seed or --tag"
         )
     model = make_model(
         args.algo,

@@ -122,6 +122,18 @@ def output_folder(value: str) -> str:
     return value
 
 
+def run_tag(value: str) -> str:
+    """A variant's name, part of a folder name: letters, digits and ``._+-`` (:func:`sb3_dtdpg.common.files.safe_name`
+    keeps it as it is); empty for none."""
+    from sb3_dtdpg.common.files import safe_name
+
+    if value and safe_name(value) != value:
+        raise argparse.ArgumentTypeError(
+            f"expected a name of letters, digits and ._+- (part of a folder name: no '..', '__' or leading '.'), got {value!r}"
+        )
+    return value
+
+
 def scenario_name(value: str) -> str:
     """
     A built-in scenario name or a scenario YAML file, loaded (so validated) once while parsing.
@@ -312,6 +324,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--learning-rate", type=_learning_rate, default=None, help="override the algorithm's learning rate")
     _add_hyperparameter_options(p)
+    p.add_argument(
+        "--tag",
+        type=run_tag,
+        default="",
+        help="a name for this variant (e.g. no_curriculum), part of the run's folder name, so of its TensorBoard "
+        "label: runs of other --hyperparams are told apart by a hash otherwise",
+    )
     p.add_argument(
         "--observation",
         choices=OBSERVATIONS,

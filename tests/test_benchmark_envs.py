@@ -46,11 +46,11 @@ def test_paper_task_runs_reads_training_success_and_tests_per_run(tmp_path):
     assert (tmp_path / "success.png").stat().st_size > 0
 
 
-def _fake_paper_task_run(out, algo, access, seed, successes, mqi, overrides=(("gamma", "0.95"),)):
+def _fake_paper_task_run(out, algo, access, seed, successes, mqi, overrides=(("gamma", "0.95"),), tag=""):
     """A finished ``sb3-dtdpg train`` run of the paper's task in ``out``: its result and its success per episode."""
     from stable_baselines3.common.logger import configure
 
-    run_id = f"{algo}_{access}_s{seed}_hp{len(overrides)}"
+    run_id = f"{algo}_{access}_s{seed}{'_' + tag if tag else ''}_hp{len(overrides)}"
     logger = configure(str(out / "tb" / run_id), ["tensorboard"])
     for episode, success in enumerate(successes, start=1):
         logger.record("mission/success", float(success))
@@ -59,7 +59,7 @@ def _fake_paper_task_run(out, algo, access, seed, successes, mqi, overrides=(("g
     logger.close()
     (out / "runs" / run_id).mkdir(parents=True)
     spec = {"algo": algo, "hyperparams": "paper", "overrides": [list(item) for item in overrides], "multiple_access": access}
-    spec.update(seed=seed, episodes=len(successes), env_id="NomaRadioMapPaper-v0", observation="paper")
+    spec.update(seed=seed, episodes=len(successes), env_id="NomaRadioMapPaper-v0", observation="paper", tag=tag)
     result = {"spec": spec, "eval": {"summary": {"success_rate": 1.0, "mqi": mqi}}, "train": {"wall_s": 2.0}}
     (out / "runs" / run_id / "result.json").write_text(json.dumps(result))
 
@@ -115,6 +115,22 @@ def test_paper_task_runs_pairs_an_ablation_s_runs_with_each_algorithm_of_its_set
     figure = paper_task_runs.plot_success(rows, tmp_path, tmp_path / "success.png")
     labels = {line.get_label().replace("\n", " ") for line in figure.axes[0].get_lines() if "seed" in line.get_label()}
     assert "DT-DPG paper gamma:0.95 phases:combined/combined NOMA (2 seeds)" in labels  # on two lines
+
+
+def test_paper_task_runs_names_a_tagged_ablation_by_its_tag_and_pairs_it_with_its_set_up(tmp_path):
+    paper_task_runs = load_script("paper_task_runs")
+    phases = "[{'name': 'a', 'reward_phase': 'combined', 'n_episodes': 2}, {'name': 'b', 'reward_phase': 'combined'}]"
+    for seed in (0, 1):
+        _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [1, 1, 1, 0], 850.0)
+        ablation = (("gamma", "0.95"), ("phases", phases))
+        _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [0, 1, 0, 0], 820.0, overrides=ablation, tag="no_curriculum")
+    rows = paper_task_runs.run_rows(tmp_path)
+    ablation = paper_task_runs.override_rows(rows)
+    assert list(ablation["contrast"]) == ["dtdpg no_curriculum - dtdpg gamma:0.95"]  # paired although the tags differ
+    assert list(ablation["n"]) == [2] and [text.split(" ± ")[0] for text in ablation["train_success"]] == ["-50.0"]
+    figure = paper_task_runs.plot_success(rows, tmp_path, tmp_path / "success.png")
+    labels = {line.get_label().replace("\n", " ") for line in figure.axes[0].get_lines() if "seed" in line.get_label()}
+    assert labels == {"DT-DPG paper gamma:0.95 NOMA (2 seeds)", "DT-DPG paper NOMA no_curriculum (2 seeds)"}
 
 
 def test_paper_task_runs_reads_reproduce_s_paper_task_runs_as_train_runs_of_their_preset(tmp_path):

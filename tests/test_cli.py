@@ -436,6 +436,18 @@ def test_the_transfer_dip_counts_the_seeds_whose_log_was_read(tmp_path):
     assert (tmp_path / "transfer_dip.csv").exists()
 
 
+def test_train_tag_names_the_run_on_the_mission_envs_and_the_model_on_the_others(tmp_path):
+    argv = ["train", "--algo", "ddpg", "--scenario", "small", "--timesteps", "150", "--eval-episodes", "1"]
+    argv += ["--hyperparams", "learning_starts:100", "--tag", "short_start", "--out", str(tmp_path), "--no-progress"]
+    assert main(argv) == 0
+    (run,) = [path.parent.name for path in tmp_path.glob("runs/*/result.json")]
+    assert run.startswith("ddpg_noma_s0_short_start_") and [path.name for path in (tmp_path / "tb").iterdir()] == [run]
+    argv = ["train", "--algo", "ddpg", "--env", "Pendulum-v1", "--timesteps", "150", "--eval-episodes", "1", "--hyperparams"]
+    argv += ["learning_starts:100"]
+    assert main([*argv, "--tag", "v2", "--out", str(tmp_path / "pendulum"), "--no-progress"]) == 0
+    assert (tmp_path / "pendulum" / "ddpg_Pendulum-v1_s0_v2.zip").is_file()
+
+
 def test_train_takes_a_torch_class_in_hyperparams_and_resumes_the_run(tmp_path, capsys):
     """``activation_fn=nn.Tanh`` as in the RL Zoo's files: the model gets it, and the run's stored text reads back
     to the same settings (a second command finds the finished run instead of refusing it as another run's)."""

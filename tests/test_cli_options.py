@@ -57,6 +57,8 @@ def bad_yaml(tmp_path):
         (["compare", "--budget", "_micro"], "cannot train"),  # tuned is the default
         (["reproduce", "--budget", "_micro"], "cannot train: the first gradient step comes after learning_starts=2000"),
         (["compare", "--n-seeds", "two"], "expected a number of seeds from 1 to 1,000, got 'two'"),
+        (["train", "--algo", "ddpg", "--tag", "../up"], "argument --tag: expected a name of letters, digits and ._+-"),
+        (["train", "--algo", "ddpg", "--tag", "no curriculum"], "got 'no curriculum'"),
     ],
 )
 def test_user_errors_are_one_line_with_status_2(argv, message, bad_yaml, capsys):
