@@ -100,12 +100,10 @@ def _spec_value(spec: dict[str, Any], field: str) -> Any:
 
 def _scenario(name: Any, env_id: str) -> Any:
     """:return: the scenario of a run, None for its env id's default room, given by name or not (the default as
-    :func:`sb3_dtdpg.experiments.specs.run_identity` reads it: the registered ``scenario``, else ``mall``)"""
-    import gymnasium as gym
+    :func:`sb3_dtdpg.experiments.specs.run_identity` reads it, :func:`noma_radiomap.registration.default_scenario`)"""
+    from noma_radiomap.registration import default_scenario
 
-    import noma_radiomap  # noqa: F401  (registers the env ids)
-
-    return None if name == gym.spec(env_id).kwargs.get("scenario", "mall") else name
+    return None if name == default_scenario(env_id) else name
 
 
 def run_rows(out: Path) -> pd.DataFrame:

@@ -35,6 +35,7 @@ __all__ = [
     "POWER_MAPPINGS",
     "check_observation",
     "check_power_mapping",
+    "default_scenario",
     "make_env",
     "register_envs",
 ]
@@ -75,6 +76,14 @@ def make_env(power_mapping: str = "paper", **kwargs: Any) -> gym.Env:
     env: gym.Env = NomaRadioMapEnv(**kwargs)
     env = TimeLimit(env, max_episode_steps=env.max_steps)
     return PowerShares(env) if power_mapping == "shares" else env
+
+
+def default_scenario(env_id: str) -> Any:
+    """
+    :param env_id: a registered env id
+    :return: the scenario the id makes when ``gymnasium.make`` gets none: the one registered with it, else ``mall``
+    """
+    return gym.spec(env_id).kwargs.get("scenario", "mall")
 
 
 def check_power_mapping(power_mapping: Any) -> str:

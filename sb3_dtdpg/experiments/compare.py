@@ -263,12 +263,11 @@ def _check_arguments(algos: Sequence[str], modes: Sequence[str], hyperparams: st
 
 def _check_planners_take(budget: Budget, env_id: str) -> None:
     """:raises ValueError: the scenario has more robots than the reference planners take (before any run trains)"""
-    import gymnasium as gym
-
     from noma_radiomap import load_scenario
     from noma_radiomap.planners import check_planner_robots
+    from noma_radiomap.registration import default_scenario
 
-    scenario = budget.scenario or gym.spec(env_id).kwargs.get("scenario", "mall")
+    scenario = budget.scenario or default_scenario(env_id)
     check_planner_robots(load_scenario(scenario).n_robots, f"compare's reference planners on {scenario}")
 
 

@@ -238,17 +238,15 @@ def run_identity(spec: RunSpec) -> dict[str, Any]:
     :param spec: the run
     :return: a JSON-ready mapping (lists, not tuples: compare it with a stored one as is)
     """
-    import gymnasium as gym
-
     import noma_radiomap
-    from noma_radiomap.registration import check_power_mapping
+    from noma_radiomap.registration import check_power_mapping, default_scenario
     from sb3_dtdpg.baselines import check_hyperparams
 
     check_hyperparams(spec.algo, spec.hyperparams)
     check_power_mapping(spec.power_mapping)
     scenario = spec.scenario
     if scenario is None:
-        scenario = gym.spec(spec.env_id).kwargs.get("scenario", "mall")
+        scenario = default_scenario(spec.env_id)
     identity = {
         "format": RUN_FORMAT_VERSION,
         "spec": {k: v for k, v in dataclasses.asdict(spec).items() if k not in _LATER_FIELDS or v != _LATER_FIELDS[k]},
