@@ -264,13 +264,15 @@ def override_rows(frame: pd.DataFrame) -> pd.DataFrame:
     kinds = variants[["algo", "tag", "overrides", "variant"]].drop_duplicates("variant")
     items = {variant: _override_items(text) for variant, text in zip(kinds["variant"], kinds["overrides"], strict=True)}
     algos = variants.groupby("overrides", dropna=False)["algo"].nunique()
+    names = naming_tags(frame)
     tables = []
     for _, first in kinds.iterrows():
         for _, second in kinds.iterrows():
             ablation, base = items[first["variant"]], items[second["variant"]]
             if base < ablation and (first["algo"] == second["algo"] or algos[first["overrides"]] == 1):
                 rows = _paired(variants, "variant", (first["variant"], second["variant"]), by)
-                tables.append(rows.assign(contrast=f"{_variant_label(first)} - {_variant_label(second)}"))
+                contrast = f"{_variant_label(first, names)} - {_variant_label(second, names)}"
+                tables.append(rows.assign(contrast=contrast))
     rows = [table for table in tables if not table.empty]
     return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=[*by, "contrast", "n", *METRICS])
 
@@ -280,12 +282,22 @@ def _override_items(text: Any) -> frozenset[str]:
     return frozenset(item for item in _OVERRIDE_START.split(_text(text)) if item != "-")
 
 
-def _variant_label(kind: pd.Series) -> str:
+def naming_tags(frame: pd.DataFrame) -> set[str]:
+    """
+    :param frame: output of :func:`run_rows`
+    :return: the tags (``train --tag``) that name a variant: given to runs of one set of overrides only, so that a
+        label may show the tag instead of the overrides
+    """
+    tagged = frame[frame["tag"].map(_text) != "-"]
+    counts = tagged.groupby("tag")["overrides"].nunique(dropna=False)
+    return {tag for tag, count in counts.items() if count == 1}
+
+
+def _variant_label(kind: pd.Series, names: set[str]) -> str:
     """:return: e.g. ``dtdpg gamma:0.95 phases:combined/combined``, the algorithm and its overrides
-    (:func:`_short_overrides`), or the algorithm and its tag (``train --tag``: ``dtdpg no_curriculum``)"""
-    name = _text(kind["tag"])
-    if name == "-":
-        name = _short_overrides(kind["overrides"])
+    (:func:`_short_overrides`), or the algorithm and its tag where the tag is one of ``names``
+    (:func:`naming_tags`: ``dtdpg no_curriculum``)"""
+    name = kind["tag"] if kind["tag"] in names else _short_overrides(kind["overrides"])
     return kind["algo"] if name == "-" else f"{kind['algo']} {name}"
 
 
@@ -346,10 +358,12 @@ def plot_success(frame: pd.DataFrame, out: Path, path: Path) -> Any:
     from sb3_dtdpg.experiments import plots, tables
 
     configuration, common = shown_configuration(frame)
+    names = naming_tags(frame)
     groups: dict[str, list[Path]] = {}
     for _, row in frame.iterrows():
-        tagged = _text(row["tag"]) != "-"  # a tag names the variant (``train --tag``): its overrides are left out
-        shown = [_label_text(column, row[column]) for column in configuration if not (tagged and column == "overrides")]
+        # a tag that names the variant stands for its overrides, shown where the tags differ between runs
+        named = row["tag"] in names and "tag" in configuration
+        shown = [_label_text(column, row[column]) for column in configuration if not (named and column == "overrides")]
         label = " ".join([tables.ALGO_LABELS[row["algo"]], *(text for text in shown if text != "-")])
         label = textwrap.fill(label, width=40, break_long_words=False)  # two legend columns fit the figure's width
         groups.setdefault(label, []).append(out / "tb" / row["run_id"])

@@ -133,6 +133,20 @@ def test_paper_task_runs_names_a_tagged_ablation_by_its_tag_and_pairs_it_with_it
     assert labels == {"DT-DPG paper gamma:0.95 NOMA (2 seeds)", "DT-DPG paper NOMA no_curriculum (2 seeds)"}
 
 
+def test_paper_task_runs_names_runs_by_their_overrides_where_one_tag_covers_several(tmp_path):
+    paper_task_runs = load_script("paper_task_runs")
+    for seed in (0, 1):
+        _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [1, 1, 0], 850.0, tag="sweep")
+        more = (("gamma", "0.95"), ("tau", "0.01"))
+        _fake_paper_task_run(tmp_path, "dtdpg", "noma", seed, [0, 1, 0], 820.0, overrides=more, tag="sweep")
+    rows = paper_task_runs.run_rows(tmp_path)
+    assert paper_task_runs.naming_tags(rows) == set()
+    assert list(paper_task_runs.override_rows(rows)["contrast"]) == ["dtdpg gamma:0.95 tau:0.01 - dtdpg gamma:0.95"]
+    figure = paper_task_runs.plot_success(rows, tmp_path, tmp_path / "success.png")
+    labels = {line.get_label().replace("\n", " ") for line in figure.axes[0].get_lines() if "seed" in line.get_label()}
+    assert labels == {"DT-DPG paper gamma:0.95 NOMA (2 seeds)", "DT-DPG paper gamma:0.95 tau:0.01 NOMA (2 seeds)"}
+
+
 def test_paper_task_runs_reads_reproduce_s_paper_task_runs_as_train_runs_of_their_preset(tmp_path):
     paper_task_runs = load_script("paper_task_runs")
     phases = "[{'name': 'a', 'reward_phase': 'combined'}]"
