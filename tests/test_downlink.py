@@ -14,8 +14,11 @@ from noma_radiomap.downlink import (
     decoding_order,
     downlink,
     equivalent_gain,
+    gain_and_sinr_db,
     in_outage,
+    sinr_to_db,
 )
+from noma_radiomap.propagation import linear_to_db
 
 B = 15_000.0  # Hz per robot (Table I)
 N0 = 10 ** ((-100.0 - 30.0) / 10.0)  # -100 dBm/Hz in W/Hz
@@ -212,3 +215,15 @@ def test_noma_intra_cluster_power_sums_down_the_decoding_order():
         0.05 * 4e-8 / noise,
     ]
     np.testing.assert_allclose(result.rate_bps, 3 * B * np.log2(1 + np.array(expected)), rtol=1e-12)
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    arrays(np.float64, st.tuples(st.just(2), st.integers(1, 5), st.integers(1, 4)), elements=st.floats(0.0, 1e12)),
+)
+def test_gain_and_sinr_db_are_the_one_by_one_conversions_bit_for_bit(gain_and_sinr):
+    # The env's step converts gains and SINRs in one pass: the bits of each conversion alone, floors included
+    gain_db, sinr_db = gain_and_sinr_db(gain_and_sinr)
+    assert np.array_equal(gain_db, linear_to_db(gain_and_sinr[0].copy()))
+    assert np.array_equal(sinr_db, sinr_to_db(gain_and_sinr[1].copy()))
+    assert gain_db.min() > -3100.0 and sinr_db.min() >= SINR_DB_FLOOR

@@ -20,7 +20,15 @@ from gymnasium.utils import seeding
 
 from noma_radiomap import geometry, rewards
 from noma_radiomap.compiled import compiled
-from noma_radiomap.downlink import MULTIPLE_ACCESS, allocate_rows, in_outage, sinr_rows, transmission_result
+from noma_radiomap.downlink import (
+    MULTIPLE_ACCESS,
+    allocate_rows,
+    gain_and_sinr_db,
+    in_outage,
+    shannon_rate,
+    signal_band,
+    sinr_rows,
+)
 from noma_radiomap.motion import GridMotion, move_robots
 from noma_radiomap.observations import GAIN_DB_RANGE, Observer, check_observation, default_observation
 from noma_radiomap.propagation import dbm_to_watt, linear_to_db, rayleigh_fading
@@ -57,7 +65,8 @@ class MissionStep:
     reward: np.ndarray
     terminated: np.ndarray
     truncated: np.ndarray
-    components: dict[str, np.ndarray]
+    component_values: np.ndarray
+    """The reward components, (5, rows), in the order of :data:`~noma_radiomap.rewards.REWARD_COMPONENTS`."""
     power_w: np.ndarray
     rate_bps: np.ndarray
     sinr_db: np.ndarray
@@ -67,12 +76,17 @@ class MissionStep:
     summary: dict[str, np.ndarray]
     """The episode summaries as of the step (:meth:`MissionCore.episode_summaries`)."""
 
+    @property
+    def components(self) -> dict[str, np.ndarray]:
+        """The reward components by name, (rows,) each."""
+        return dict(zip(rewards.REWARD_COMPONENTS, self.component_values, strict=True))
+
     def info(self, k: int) -> dict[str, Any]:
         """The ``info`` of the ``k``-th stepped mission: ``reward_components``, :data:`INFO_KEYS` and the episode
         summary as of the step (:data:`SUMMARY_KEYS`), in this order."""
         summary = self.summary
         return {
-            "reward_components": {name: float(value[k]) for name, value in self.components.items()},
+            "reward_components": dict(zip(rewards.REWARD_COMPONENTS, self.component_values[:, k].tolist(), strict=True)),
             "rate_bps": self.rate_bps[k],
             "sinr_db": self.sinr_db[k],
             "outage": self.outage[k],
@@ -92,8 +106,8 @@ class MissionStep:
         infos cost as much as the step's physics.
         """
         # The five reward components as one dict display per mission too (twice as fast as dict(zip(...)))
-        time_key, inducing_key, qos_key, arrival_key, success_key = self.components
-        columns = zip(*(value.tolist() for value in self.components.values()), strict=True)
+        time_key, inducing_key, qos_key, arrival_key, success_key = rewards.REWARD_COMPONENTS
+        columns = zip(*self.component_values.tolist(), strict=True)
         summary = self.summary
         return [
             {
@@ -268,6 +282,8 @@ class MissionCore:
         self.max_power_w = float(dbm_to_watt(sc.ap.max_power_dbm))
         self._noise_w_per_hz = float(dbm_to_watt(sc.radio.noise_dbm_per_hz))
         self._bandwidth_per_robot_hz = float(sc.radio.bandwidth_per_robot_hz)
+        #: The band of each robot's signal (the cluster band in NOMA, its own in OMA), for its rate
+        self._signal_band_hz = signal_band(sc.n_robots, self._bandwidth_per_robot_hz, multiple_access == "noma")
         mission = sc.mission
         self.reward_constants = rewards.RewardConstants(
             time_cost=mission.time_cost,
@@ -396,7 +412,7 @@ class MissionCore:
         row_indices = self._all_rows[rows]
         room, radio, motion = self.scenario.room, self.scenario.radio, self.motion
         noma = self.multiple_access == "noma"
-        arriving, active, gain, power, sinr, order, bad = _transmission_rows(
+        arriving, active, gain_and_sinr, power, order, bad = _transmission_rows(
             self.positions,
             self.destinations,
             self.arrived,
@@ -416,12 +432,12 @@ class MissionCore:
         )
         if bad >= 0:
             raise motion.position_error(self.positions[rows], bad)
-        gain_db = linear_to_db(gain)
+        gain_db, sinr_db = gain_and_sinr_db(gain_and_sinr)
         self.gain_db[rows] = gain_db
-        result = transmission_result(sinr, order, self._bandwidth_per_robot_hz, noma)
-        outage = in_outage(result.rate_bps, radio.qos_rate_bps) & active
+        rate_bps = shannon_rate(gain_and_sinr[1], self._signal_band_hz)
+        outage = in_outage(rate_bps, radio.qos_rate_bps) & active
         constants, mission = self.reward_constants, self.scenario.mission
-        values, reward, terminated, truncated, success, mqi, mission_time, outage_steps = _outcome_rows(
+        numbers, flags, counts = _outcome_rows(
             row_indices,
             active,
             arriving,
@@ -439,16 +455,19 @@ class MissionCore:
             mission.t_total,
             mission.outage_penalty,
         )
+        values, reward, mqi = numbers[:_N_COMPONENTS], numbers[_N_COMPONENTS], numbers[_N_COMPONENTS + 1]
+        terminated, truncated, success = flags
+        mission_time, outage_steps = counts
         summary = {"is_success": success, "mqi": mqi, "mission_time": mission_time, "outage_steps": outage_steps}
         return MissionStep(
             rows=row_indices,
             reward=reward,
             terminated=terminated,
             truncated=truncated,
-            components=dict(zip(rewards.REWARD_COMPONENTS, values, strict=True)),
+            component_values=values,
             power_w=power,
-            rate_bps=result.rate_bps,
-            sinr_db=result.sinr_db,
+            rate_bps=rate_bps,
+            sinr_db=sinr_db,
             decoding_order=order,
             outage=outage,
             gain_db=gain_db,
@@ -475,6 +494,8 @@ class MissionCore:
         if self.channel != "rayleigh" or not len(rows):
             return _NO_FADING
         shape = (self.n_robots, self._gain_table.shape[1])
+        if len(rows) == 1:  # the same draws, without np.stack's copy (a single env's step)
+            return rayleigh_fading(self.np_randoms[rows[0]], (1, *shape))
         return np.stack([rayleigh_fading(self.np_randoms[i], shape) for i in rows])
 
     def _distances(self, rows: np.ndarray | slice) -> np.ndarray:
@@ -509,6 +530,7 @@ class MissionCore:
 
 
 _NO_FADING = np.zeros((0, 0, 0))
+_N_COMPONENTS = len(rewards.REWARD_COMPONENTS)
 
 
 @compiled
@@ -529,16 +551,16 @@ def _transmission_rows(
     bandwidth_per_robot_hz: float,
     noise_w_per_hz: float,
     noma: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """
     The physics of one step of the missions ``rows`` (checked actions (rows, U, 3)), compiled in one call: the
     robots still on their way move (:func:`~noma_radiomap.motion.move_robots`, the motion's constants from
     :meth:`~noma_radiomap.motion.GridMotion.kernel_constants`), their links at the new positions
     (:func:`_link_rows`), the power allocation (:func:`~noma_radiomap.downlink.allocate_rows`) and the SINRs
     with the decoding order (:func:`~noma_radiomap.downlink.sinr_rows`). Writes the new positions into
-    ``positions``. Returns the arriving and the active robots, the AP gains, the powers, the SINRs, the decoding
-    order and -1, or, when a robot of ``rows`` is not on a free point, its flat index in (rows, U) as the last
-    value, having changed nothing.
+    ``positions``. Returns the arriving and the active robots, the AP gains and the SINRs stacked (2, rows, U)
+    (for their one dB conversion), the powers, the decoding order and -1, or, when a robot of ``rows`` is not on
+    a free point, its flat index in (rows, U) as the last value, having changed nothing.
     """
     n_rows, n_robots = len(rows), arrived.shape[1]
     start = np.empty((n_rows, n_robots, 2))
@@ -567,13 +589,15 @@ def _transmission_rows(
     arriving = at_goal.reshape(n_rows, n_robots) & active
     if bad >= 0:
         empty = np.empty((n_rows, n_robots))
-        return arriving, active, empty, empty, empty, np.empty((n_rows, n_robots), dtype=np.int64), bad
+        return arriving, active, np.empty((2, n_rows, n_robots)), empty, np.empty((n_rows, n_robots), dtype=np.int64), bad
     for k in range(n_rows):
         positions[rows[k]] = new[k]
     gain, interference = _link_rows(new, gain_table, resolution, nx, ny, fading, interferer_power_w)
     power = allocate_rows(power_actions, active, max_power_w)
     sinr, order = sinr_rows(power, gain, interference, bandwidth_per_robot_hz, noise_w_per_hz, noma)
-    return arriving, active, gain, power, sinr, order, -1
+    gain_and_sinr = np.empty((2, n_rows, n_robots))  # one array for the one dB conversion of both
+    gain_and_sinr[0], gain_and_sinr[1] = gain, sinr
+    return arriving, active, gain_and_sinr, power, order, -1
 
 
 @compiled
@@ -594,27 +618,35 @@ def _outcome_rows(
     max_steps: int,
     t_total: float,
     mqi_outage_penalty: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     The rest of one step of the missions ``rows``, compiled in one call: the reward components
     (:func:`~noma_radiomap.rewards.component_rows`) and the reward with each mission's phase weights ((5, N)
     ``weights``; :func:`~noma_radiomap.rewards.weighted_rows`), the bookkeeping in place on the (N, ...) state
-    (:func:`_record_step`) and the episode summaries as of the step (:func:`_summary_rows`). Returns the
-    components (5, rows), the rewards, terminated, truncated and the summary's all-arrived flags, MQIs, mission
-    times and outage counts.
+    (:func:`_record_step`) and the episode summaries as of the step (:func:`_summary_rows`). Returns three arrays
+    (each returned array costs a boxing, about as much as the kernel's work for one mission): the numbers, (7,
+    rows): the five components, the rewards and the MQIs; the flags, (3, rows): terminated, truncated and all
+    arrived; the counts, (2, rows, U): the mission times and the outage counts.
     """
     values = component_rows(active, arriving, outage, distance, d_max, *reward_constants)
-    row_weights = np.empty((weights.shape[0], len(rows)))
-    for k in range(len(rows)):
+    n_rows, n_components = len(rows), values.shape[0]
+    row_weights = np.empty((weights.shape[0], n_rows))
+    for k in range(n_rows):
         row_weights[:, k] = weights[:, rows[k]]
-    reward = weighted_rows(values, row_weights)
-    terminated, truncated = _record_step(
+    numbers = np.empty((n_components + 2, n_rows))
+    numbers[:n_components] = values
+    numbers[n_components] = weighted_rows(values, row_weights)
+    flags = np.empty((3, n_rows), dtype=np.bool_)
+    flags[0], flags[1] = _record_step(
         rows, arriving, outage, arrived, step_counts, arrival_steps, outage_steps, max_episode_steps
     )
     success, mqi, mission_time, outage_counts = _summary_rows(
         arrived[rows], arrival_steps[rows], outage_steps[rows], max_steps, t_total, mqi_outage_penalty
     )
-    return values, reward, terminated, truncated, success, mqi, mission_time, outage_counts
+    numbers[n_components + 1], flags[2] = mqi, success
+    counts = np.empty((2, *mission_time.shape), dtype=np.int64)
+    counts[0], counts[1] = mission_time, outage_counts
+    return numbers, flags, counts
 
 
 @compiled

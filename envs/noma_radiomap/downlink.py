@@ -27,6 +27,8 @@ MULTIPLE_ACCESS: tuple[str, ...] = ("noma", "oma")
 SINR_DB_FLOOR = -300.0
 _SINR_FLOOR = 10.0 ** (SINR_DB_FLOOR / 10.0)
 _TINY = float(np.finfo(np.float64).tiny)
+#: The floors of :func:`gain_and_sinr_db`: the channel gain's (linear_to_db's default) and the SINR's
+_GAIN_AND_SINR_FLOORS = np.array([_TINY, _SINR_FLOOR]).reshape(2, 1, 1)
 
 
 class DownlinkResult(NamedTuple):
@@ -233,7 +235,8 @@ def shannon_rate(sinr: np.ndarray, bandwidth_hz: float) -> np.ndarray:
     :return: rates in bit/s
     """
     rate = 1.0 + sinr
-    if not isinstance(rate, np.ndarray) or np.ndim(bandwidth_hz) != 0:
+    scalar_band = isinstance(bandwidth_hz, (int, float)) or np.ndim(bandwidth_hz) == 0  # isinstance: the fast test
+    if not isinstance(rate, np.ndarray) or not scalar_band:
         return bandwidth_hz * np.log2(rate)
     np.log2(rate, out=rate)  # in place: the same bits with one array instead of three
     rate *= bandwidth_hz
@@ -243,6 +246,17 @@ def shannon_rate(sinr: np.ndarray, bandwidth_hz: float) -> np.ndarray:
 def sinr_to_db(sinr: np.ndarray) -> np.ndarray:
     """Linear SINR to dB, floored at :data:`SINR_DB_FLOOR` (0 W gives the floor, not -inf)."""
     return linear_to_db(sinr, _SINR_FLOOR)
+
+
+def gain_and_sinr_db(gain_and_sinr: np.ndarray) -> np.ndarray:
+    """
+    The channel gains and the SINRs of (M, U) robots in dB in one pass, the same numbers as
+    :func:`~noma_radiomap.propagation.linear_to_db` of the gains and :func:`sinr_to_db` of the SINRs.
+
+    :param gain_and_sinr: linear gains and SINRs stacked, (2, M, U)
+    :return: ``[gain_db, sinr_db]``, (2, M, U) float64
+    """
+    return linear_to_db(gain_and_sinr, _GAIN_AND_SINR_FLOORS)
 
 
 def downlink(

@@ -92,13 +92,14 @@ def db_to_linear(value_db: np.ndarray | float) -> np.ndarray:
     return np.power(10.0, np.asarray(value_db, dtype=np.float64) / 10.0)
 
 
-def linear_to_db(value: np.ndarray | float, floor: float = _TINY) -> np.ndarray:
+def linear_to_db(value: np.ndarray | float, floor: np.ndarray | float = _TINY) -> np.ndarray:
     """
     Convert a linear power ratio to dB, ``10 log10(max(x, floor))``: the floor keeps a zero ratio (a robot
     given no power, a fade with ``|h|^2 = 0``) finite.
 
     :param value: linear ratio(s), >= 0
-    :param floor: the smallest ratio converted (default: the smallest normal float64, -3077 dB)
+    :param floor: the smallest ratio converted (default: the smallest normal float64, -3077 dB), or an array of
+        them broadcasting against ``value``
     :return: ratio(s) in dB
     """
     ratio = np.maximum(value, floor)
