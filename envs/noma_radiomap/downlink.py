@@ -17,7 +17,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from noma_radiomap.compiled import as_rows, compiled
-from noma_radiomap.propagation import linear_to_db
+from noma_radiomap.propagation import _TINY, linear_to_db
 
 MultipleAccess = Literal["noma", "oma"]
 MULTIPLE_ACCESS: tuple[str, ...] = ("noma", "oma")
@@ -26,8 +26,8 @@ MULTIPLE_ACCESS: tuple[str, ...] = ("noma", "oma")
 #: SINR instead of -inf (its rate is exactly 0 either way).
 SINR_DB_FLOOR = -300.0
 _SINR_FLOOR = 10.0 ** (SINR_DB_FLOOR / 10.0)
-_TINY = float(np.finfo(np.float64).tiny)
-#: The floors of :func:`gain_and_sinr_db`: the channel gain's (linear_to_db's default) and the SINR's
+#: The floors of :func:`gain_and_sinr_db`: the channel gain's (linear_to_db's default, the smallest normal float)
+#: and the SINR's
 _GAIN_AND_SINR_FLOORS = np.array([_TINY, _SINR_FLOOR]).reshape(2, 1, 1)
 
 
