@@ -78,7 +78,9 @@ FILES_WITHOUT_THE_ENV = [
     ("NomaRadioMap-v0", "dtdpg_paper.yml", "NomaRadioMapPaper-v0, NomaRadioMapPaperOMA-v0"),  # the paper's task
     ("NomaRadioMapPaper-v0", "dtdpg.yml", "NomaRadioMap-v0, NomaRadioMapOMA-v0"),
 ]
-_OK_FILE = "Pendulum-v1:\n  n_timesteps: 1000\n  policy: MlpPolicy\n  learning_starts: 100\n"
+#: A hyperparameter file's entry for Pendulum-v1 without learning_starts, and the whole file with it
+_ENTRY_HEAD = "Pendulum-v1:\n  n_timesteps: 1000\n  policy: MlpPolicy\n"
+_OK_FILE = _ENTRY_HEAD + "  learning_starts: 100\n"
 
 
 def _error_cases() -> dict[str, tuple[dict[str, str], list[str]]]:
@@ -86,7 +88,7 @@ def _error_cases() -> dict[str, tuple[dict[str, str], list[str]]]:
     cases = {}
     for entry, _ in BAD_ENTRIES:
         default_start = "" if "learning_starts" in entry else "  learning_starts: 100\n"
-        file = "Pendulum-v1:\n  n_timesteps: 1000\n  policy: MlpPolicy\n" + default_start + entry
+        file = _ENTRY_HEAD + default_start + entry
         cases[f"entry {entry}"] = ({"bad.yml": file}, ["--conf-file", "bad.yml"])
     for config, args, _ in BAD_CONFIGS:
         files = {} if config is None else {"ok.yml": config}
@@ -199,7 +201,7 @@ def test_a_dtdpg_search_on_an_env_without_reward_phases_is_one_error_line(tmp_pa
 
 
 def test_enjoy_without_a_model_is_one_error_line(tmp_path):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "envs"), os.environ.get("PYTHONPATH", "")])}
+    env = _environment()
     command = [sys.executable, "-m", "sb3_dtdpg.enjoy", "--algo", "dtdpg", "--env", "Pendulum-v1", "--no-render"]
     (tmp_path / "empty" / "dtdpg" / "Pendulum-v1_1").mkdir(parents=True)
     for folder, message in (("nowhere", "folder was not found"), ("empty", "No model found for dtdpg on Pendulum-v1")):
