@@ -691,7 +691,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _commands()[args.command](args)
     except KeyboardInterrupt:
-        if args.command in ("compare", "reproduce", "train"):  # jobs of runs, each written as it finishes
+        if args.command in ("compare", "reproduce"):  # jobs of runs, each written as it finishes
+            from sb3_dtdpg.experiments.budgets import CHECKPOINT_EVERY
+
+            print(
+                f"interrupted: finished runs are saved, the others checkpointed every {CHECKPOINT_EVERY} episodes; "
+                "run the same command again to resume",
+                file=sys.stderr,
+            )
+        elif args.command == "train":
             print("interrupted: finished runs are saved; run the same command again to resume", file=sys.stderr)
         else:  # one piece of work, its output written at its end
             print(f"interrupted: {args.command} stopped before its end (nothing to resume: run it again)", file=sys.stderr)

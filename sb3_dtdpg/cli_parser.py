@@ -349,8 +349,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--checkpoint-every",
         type=positive_int,
         default=10,
-        help="NomaRadioMap envs: save model and replay buffer every N episodes; the same command resumes from the "
-        "last one (default: 10)",
+        help="NomaRadioMap envs: save a checkpoint (model, replay buffer, env and random state) every N episodes; "
+        "the same command resumes from the last one, as the uninterrupted run would go on (default: 10)",
     )
     p.add_argument("--eval-episodes", type=positive_int, default=20, help="test episodes after training (default: 20)")
     p.add_argument("--eval-seed", type=_seed, default=10_000, help="seed of the first test episode (default: 10000)")

@@ -9,6 +9,7 @@ import threading
 import pytest
 
 from sb3_dtdpg.experiments import distributed
+from sb3_dtdpg.experiments.budgets import CHECKPOINT_EVERY
 from sb3_dtdpg.experiments.distributed import run_study_worker, study_specs
 from sb3_dtdpg.experiments.runs import (
     OutputBusyError,
@@ -181,8 +182,8 @@ def test_the_worker_says_what_is_left_and_ends_an_interruption_in_one_line(tmp_p
         distributed.main(["compare", *options])
     assert exit_info.value.code == 130
     assert capsys.readouterr().err.strip() == (
-        "interrupted: when a worker takes the run again, it trains afresh (or is only tested again if it was in its test "
-        "episodes)"
+        f"interrupted: when a worker takes the run again, it goes on from its last checkpoint (every {CHECKPOINT_EVERY} "
+        "episodes), or is only tested again if it was in its test episodes"
     )
 
 

@@ -278,7 +278,7 @@ TRAIN = [
 
 @pytest.mark.parametrize("algo", ["ddpg", "dtdpg"])
 def test_train_writes_checkpoints_and_resumes(tmp_path, monkeypatch, capsys, algo):
-    original = runs.PeriodicCheckpoint._on_rollout_end
+    original = runs.PeriodicCheckpoint._on_rollout_start
 
     def interrupt_after_first_checkpoint(self):
         due = self._due
@@ -287,7 +287,7 @@ def test_train_writes_checkpoints_and_resumes(tmp_path, monkeypatch, capsys, alg
             raise KeyboardInterrupt
 
     argv = [*TRAIN, "--algo", algo, "--out", str(tmp_path), "--tb", str(tmp_path / "tb"), "--no-progress"]
-    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_end", interrupt_after_first_checkpoint)
+    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_start", interrupt_after_first_checkpoint)
     assert main(argv) == 130
     message = capsys.readouterr().err
     run_dir = tmp_path / "runs" / f"{algo}_noma_s0"
@@ -300,7 +300,7 @@ def test_train_writes_checkpoints_and_resumes(tmp_path, monkeypatch, capsys, alg
     stale = run_dir / ".model.zip.killed.tmp"  # what a write killed by SIGKILL leaves
     stale.write_bytes(b"")
 
-    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_end", original)
+    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_start", original)
     assert main(argv) == 0
     assert "resumed after episode 2" in capsys.readouterr().out
     result = json.loads((run_dir / "result.json").read_text())
@@ -321,7 +321,7 @@ def test_a_resumed_train_keeps_its_logs_up_to_the_checkpoint_and_shows_each_step
     import pandas as pd
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    original = runs.PeriodicCheckpoint._on_rollout_end
+    original = runs.PeriodicCheckpoint._on_rollout_start
 
     def interrupt_an_episode_after_the_first_checkpoint(self):  # the checkpoint after episode 2, logs to episode 3
         original(self)
@@ -329,13 +329,13 @@ def test_a_resumed_train_keeps_its_logs_up_to_the_checkpoint_and_shows_each_step
             raise KeyboardInterrupt
 
     argv = [*TRAIN, "--algo", "ddpg", "--episodes", "6", "--out", str(tmp_path), "--no-progress"]
-    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_end", interrupt_an_episode_after_the_first_checkpoint)
+    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_start", interrupt_an_episode_after_the_first_checkpoint)
     assert main(argv) == 130
     checkpoint = json.loads((tmp_path / "runs" / "ddpg_noma_s0" / "checkpoint.json").read_text())
     tb = tmp_path / "tb" / "ddpg_noma_s0"
     before = pd.read_csv(tb / "progress.csv")
     assert list(before["episode/number"]) == [1, 2, 3]  # the interrupted attempt logged past its checkpoint (2)
-    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_end", original)
+    monkeypatch.setattr(runs.PeriodicCheckpoint, "_on_rollout_start", original)
     assert main(argv) == 0
     after = pd.read_csv(tb / "progress.csv")
     assert list(after["episode/number"]) == [1, 2, 3, 4, 5, 6]  # one row per episode, the third trained again

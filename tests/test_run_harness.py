@@ -259,7 +259,7 @@ def test_a_checkpoint_of_any_algorithm_records_the_env_it_trains_on(tmp_path, mo
 
 def _stop_after_first_checkpoint(patch):
     """Make training raise ``KeyboardInterrupt`` right after its first checkpoint (``patch``: a monkeypatch)."""
-    original = PeriodicCheckpoint._on_rollout_end
+    original = PeriodicCheckpoint._on_rollout_start
 
     def interrupt_after_first_checkpoint(self):
         due = self._due
@@ -267,7 +267,7 @@ def _stop_after_first_checkpoint(patch):
         if due:
             raise KeyboardInterrupt
 
-    patch.setattr(PeriodicCheckpoint, "_on_rollout_end", interrupt_after_first_checkpoint)
+    patch.setattr(PeriodicCheckpoint, "_on_rollout_start", interrupt_after_first_checkpoint)
 
 
 def _interrupt_after_first_checkpoint(spec, out, monkeypatch):
@@ -531,16 +531,23 @@ def test_a_compare_run_interrupted_in_its_evaluations_is_evaluated_again_not_tra
     assert retested["train"]["timesteps"] == uninterrupted["train"]["timesteps"]
 
 
-@pytest.mark.parametrize("leftover", ["resumed training", "another run's", "unreadable model"])
+@pytest.mark.parametrize(
+    "leftover", ["resumed training", "resumed training of an earlier version", "another run's", "unreadable model"]
+)
 def test_a_compare_run_retrains_leftovers_that_are_not_its_uninterrupted_training(tmp_path, monkeypatch, leftover):
-    """Only a training that ran from its start in one go is this run's as compare would train it: a record of a
-    training resumed from a checkpoint (``sb3-dtdpg train``), of another identity, or beside a damaged model is a
-    leftover, trained again (not an error, not tested as this run)."""
+    """Only a training that is the uninterrupted run's is this run's as compare would train it: a record of a
+    training resumed from a checkpoint without its training state (``sb3-dtdpg train`` of an earlier version, or
+    resumed from such a checkpoint), of another identity, or beside a damaged model is a leftover, trained again
+    (not an error, not tested as this run)."""
 
     run_dir = _interrupted_in_its_evaluations(monkeypatch, tmp_path)
     record = json.loads((run_dir / "trained.json").read_text())
+    assert record["train"]["same_as_uninterrupted"] is True
     if leftover == "resumed training":
+        record["train"].update(resumed_at_episode=1, same_as_uninterrupted=False)
+    elif leftover == "resumed training of an earlier version":  # recorded nothing about it
         record["train"]["resumed_at_episode"] = 1
+        del record["train"]["same_as_uninterrupted"]
     elif leftover == "another run's":
         record["identity"]["spec"]["eval_episodes"] = 7
     else:

@@ -8,7 +8,22 @@ from typing import Any
 from sb3_dtdpg.arguments import MAX_SEEDS
 from sb3_dtdpg.experiments.specs import RunSpec
 
-__all__ = ["BUDGETS", "BUDGET_ALIASES", "MAX_SEEDS", "PUBLIC_BUDGETS", "Budget", "check_budget", "check_seeds", "get_budget"]
+__all__ = [
+    "BUDGETS",
+    "BUDGET_ALIASES",
+    "CHECKPOINT_EVERY",
+    "MAX_SEEDS",
+    "PUBLIC_BUDGETS",
+    "Budget",
+    "check_budget",
+    "check_seeds",
+    "get_budget",
+]
+
+#: Episodes between the checkpoints of the runs of ``compare``, ``reproduce`` and distributed workers: an
+#: interrupted run goes on from its last one. Saving one takes about 0.1 s with the tuned settings' 200 000-transition
+#: replay buffer.
+CHECKPOINT_EVERY = 25
 
 
 @dataclass(frozen=True)

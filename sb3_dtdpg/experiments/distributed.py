@@ -25,7 +25,15 @@ from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.common.files import json_default
-from sb3_dtdpg.experiments.runs import OutputBusyError, RunSpec, get_budget, load_result, result_path, run_one
+from sb3_dtdpg.experiments.runs import (
+    CHECKPOINT_EVERY,
+    OutputBusyError,
+    RunSpec,
+    get_budget,
+    load_result,
+    result_path,
+    run_one,
+)
 from sb3_dtdpg.experiments.storage import (  # output_lock's OS locks, held apart
     FOLDER_LOCK,
     hold_lock,
@@ -99,8 +107,9 @@ def _lock_is_free(path: Path) -> bool:
         return free
 
 
-#: How a worker runs one spec: a run interrupted in its evaluations is evaluated again, not trained again.
-_retest_or_run = functools.partial(run_one, retest=True)
+#: How a worker runs one spec: checkpointed; a run interrupted in training goes on from its last checkpoint, one
+#: interrupted in its evaluations is evaluated again, not trained again.
+_retest_or_run = functools.partial(run_one, retest=True, checkpoint_every=CHECKPOINT_EVERY)
 
 
 def run_study_worker(
@@ -336,8 +345,8 @@ def main(argv: list[str] | None = None) -> None:
         args.error(str(error))
     except KeyboardInterrupt:
         print(
-            "interrupted: when a worker takes the run again, it trains afresh (or is only tested again if it was in "
-            "its test episodes)",
+            f"interrupted: when a worker takes the run again, it goes on from its last checkpoint (every "
+            f"{CHECKPOINT_EVERY} episodes), or is only tested again if it was in its test episodes",
             file=sys.stderr,
         )
         raise SystemExit(130) from None

@@ -168,7 +168,7 @@ def run_in_pool(
     failed run does not take the others down.
 
     When the call ends early (Ctrl-C, SIGTERM, an error), the workers are killed and gone before it returns: the
-    runs in progress are abandoned (next time they start afresh, or are tested again if their training had ended)
+    runs in progress are abandoned (next time they go on from their last checkpoints, or are tested again)
     and no queued run starts, so that the caller releases its folder lock only when nothing writes to the folder
     any more. Ctrl-C raises ``KeyboardInterrupt``; SIGTERM (when it has its default action) then ends the process
     as it would have.

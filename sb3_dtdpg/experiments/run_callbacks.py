@@ -102,19 +102,24 @@ class RunProgress(BaseCallback):
 
 class PeriodicCheckpoint(BaseCallback):
     """
-    Save the model and its replay buffer every ``every`` episodes (at the end of the rollout in which the
-    episode ended, so the buffer holds its last transition), for :func:`sb3_dtdpg.experiments.runs.run_one` to
-    resume from.
+    Save the model, its replay buffer and the training state (:mod:`sb3_dtdpg.experiments.training_state`) every
+    ``every`` episodes, for :func:`sb3_dtdpg.experiments.runs.run_one` to resume from. The checkpoint is taken at
+    the start of the rollout after the one in which the episode ended: the buffer holds the episode's last
+    transition and the gradient steps that followed it are done, so that the resumed ``learn`` starts where the
+    uninterrupted one goes on.
 
     :param run_dir: the run's folder (``checkpoint.json`` and ``checkpoints/`` are written there)
     :param every: episodes between checkpoints
     :param identity: the run's :func:`sb3_dtdpg.experiments.specs.run_identity`, stored with each checkpoint
     :param counter: the run's episode count
+    :param exact: whether the training so far is the uninterrupted run's (recorded with each checkpoint)
     """
 
-    def __init__(self, run_dir: Path, every: int, identity: dict[str, Any], counter: EpisodeCounter) -> None:
+    def __init__(
+        self, run_dir: Path, every: int, identity: dict[str, Any], counter: EpisodeCounter, exact: bool = True
+    ) -> None:
         super().__init__()
-        self.run_dir, self.every, self.identity, self.counter = run_dir, every, identity, counter
+        self.run_dir, self.every, self.identity, self.counter, self.exact = run_dir, every, identity, counter, exact
         self._due = False
 
     def _on_step(self) -> bool:
@@ -124,11 +129,11 @@ class PeriodicCheckpoint(BaseCallback):
             self._due = self._due or any(n % self.every == 0 for n in range(first, self.counter.n_episodes + 1))
         return True
 
-    def _on_rollout_end(self) -> None:
+    def _on_rollout_start(self) -> None:
         if self._due:
             self._due = False
             check_finite(self.model)  # a diverged model is no checkpoint to resume from
-            save_checkpoint(self.model, self.run_dir, self.identity, self.counter.n_episodes)
+            save_checkpoint(self.model, self.run_dir, self.identity, self.counter.n_episodes, self.exact)
 
 
 def non_finite(tensors: Iterable[tuple[str, Any]]) -> list[str]:

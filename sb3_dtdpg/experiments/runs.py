@@ -34,7 +34,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_dtdpg import env_settings
 from sb3_dtdpg.common.files import atomic_write, json_default, remove_temp_files, write_json
-from sb3_dtdpg.experiments.budgets import BUDGETS, PUBLIC_BUDGETS, Budget, check_budget, get_budget
+from sb3_dtdpg.experiments import training_state
+from sb3_dtdpg.experiments.budgets import BUDGETS, CHECKPOINT_EVERY, PUBLIC_BUDGETS, Budget, check_budget, get_budget
 from sb3_dtdpg.experiments.pool import RunReport, RunsFailedError, run_in_pool, worker_pool
 from sb3_dtdpg.experiments.provenance import made_with, warn_other_versions
 from sb3_dtdpg.experiments.run_callbacks import (
@@ -75,6 +76,7 @@ from sb3_dtdpg.experiments.storage import (
 
 __all__ = [
     "BUDGETS",
+    "CHECKPOINT_EVERY",
     "PUBLIC_BUDGETS",
     "RUN_FORMAT_VERSION",
     "Budget",
@@ -178,42 +180,71 @@ def _build_model(
     spec: RunSpec, run_dir: Path, checkpoint: dict[str, Any] | None, identity: dict[str, Any], verbose: int
 ) -> tuple[Any, Any, int]:
     """
-    :return: the training env, the model (new, or loaded from the checkpoint) and the episodes already trained
+    :return: the training env, the model (new, or loaded from the checkpoint) and the episodes already trained;
+        a model resumed from a checkpoint with a training state (:mod:`.training_state`) trains on with the env
+        and random generators as they were
     :raises DamagedRecordError: the checkpoint cannot be loaded, has no replay buffer, or its model is not the one
         its record was written with (:func:`_check_checkpoint_model`)
     """
+    from sb3_dtdpg.baselines import make_env
+
+    phase_files = {"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}
+    if checkpoint is not None:
+        return _resume_model(spec, run_dir, checkpoint, identity, verbose, phase_files)
+    env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
+    model = build_model(spec, env, verbose=verbose, **phase_files)
+    return env, model, 0
+
+
+def _resume_model(
+    spec: RunSpec,
+    run_dir: Path,
+    checkpoint: dict[str, Any],
+    identity: dict[str, Any],
+    verbose: int,
+    phase_files: dict[str, str],
+) -> tuple[Any, Any, int]:
+    """:func:`_build_model` from a checkpoint"""
     from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 
     from sb3_dtdpg.baselines import load_model, make_env
 
-    env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
-    phase_files = {"curriculum_save_path": str(run_dir)} if spec.algo == "dtdpg" else {}
-    if checkpoint is not None:
-        pointer, buffer = run_dir / "checkpoint.json", checkpoint["path"] / "replay_buffer.pkl"
+    pointer, folder = run_dir / "checkpoint.json", checkpoint["path"]
+    buffer, state_file = folder / "replay_buffer.pkl", folder / training_state.TRAINING_STATE
+    env, vec_env = None, None
+    try:
         try:
-            try:
-                model = load_model(
-                    spec.algo, checkpoint["path"] / "model.zip", env=env, device="cpu", verbose=verbose, **phase_files
-                )
-                if buffer.exists():
-                    model.load_replay_buffer(buffer)
-            except Exception as error:  # written atomically: damaged from outside
-                raise DamagedRecordError(
-                    f"the checkpoint in {checkpoint['path']} cannot be loaded ({type(error).__name__}: "
-                    f"{str(error)[:200]}); delete {pointer} to start the run afresh"
-                ) from error
-            if isinstance(model, OffPolicyAlgorithm) and not buffer.exists():  # saved with every off-policy model
-                raise DamagedRecordError(
-                    f"the checkpoint in {checkpoint['path']} has no replay_buffer.pkl (removed from outside?); "
-                    f"delete {pointer} to start the run afresh"
-                )
-            _check_checkpoint_model(model, checkpoint, identity, pointer)
-        except DamagedRecordError:
-            env.close()
-            raise
-        return env, model, int(checkpoint["episodes"])
-    model = build_model(spec, env, verbose=verbose, **phase_files)
-    return env, model, 0
+            if state_file.exists():  # the env as it was (the model loads without one: loading would seed it)
+                state = training_state.load(state_file)
+                vec_env = state["env"]
+                env = vec_env.envs[0]
+                model = load_model(spec.algo, folder / "model.zip", device="cpu", verbose=verbose, **phase_files)
+                model.set_env(vec_env, force_reset=False)
+            else:  # a checkpoint of an earlier version: a fresh env
+                env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
+                model = load_model(spec.algo, folder / "model.zip", env=env, device="cpu", verbose=verbose, **phase_files)
+            if buffer.exists():
+                model.load_replay_buffer(buffer)
+        except Exception as error:  # written atomically: damaged from outside
+            raise DamagedRecordError(
+                f"the checkpoint in {folder} cannot be loaded ({type(error).__name__}: "
+                f"{str(error)[:200]}); delete {pointer} to start the run afresh"
+            ) from error
+        if isinstance(model, OffPolicyAlgorithm) and not buffer.exists():  # saved with every off-policy model
+            raise DamagedRecordError(
+                f"the checkpoint in {folder} has no replay_buffer.pkl (removed from outside?); "
+                f"delete {pointer} to start the run afresh"
+            )
+        _check_checkpoint_model(model, checkpoint, identity, pointer)
+    except DamagedRecordError:
+        for opened in (vec_env, env):
+            if opened is not None:
+                opened.close()
+                break
+        raise
+    if vec_env is not None:
+        training_state.restore_generators(model, state["generators"])
+    return env, model, int(checkpoint["episodes"])
 
 
 def _callbacks(
@@ -224,14 +255,18 @@ def _callbacks(
     done_episodes: int,
     identity: dict[str, Any],
     checkpoint_every: int | None,
+    exact: bool,
 ) -> tuple[EpisodeCounter, list[BaseCallback], int]:
-    """:return: the run's episode counter, its callbacks (the counter first) and the timesteps left to train"""
+    """
+    :param exact: whether the training so far is the uninterrupted run's (recorded with the checkpoints)
+    :return: the run's episode counter, its callbacks (the counter first) and the timesteps left to train
+    """
     from sb3_dtdpg.baselines import mission_callbacks
 
     if spec.timesteps is None:
-        remaining = spec.episodes - done_episodes
-        counter = EpisodeReturnLogger(start=done_episodes, max_episodes=remaining)
-        total_timesteps = remaining * max_steps
+        counter = EpisodeReturnLogger(start=done_episodes, max_episodes=spec.episodes - done_episodes)
+        # the uninterrupted run's step budget, so that a resumed run's schedules (learning rate) go on as they were
+        total_timesteps = spec.episodes * max_steps - model.num_timesteps
         progress = RunProgress(progress_path(out, spec), spec.episodes, counter, "episodes")
     else:
         counter = EpisodeReturnLogger(start=done_episodes)
@@ -239,7 +274,7 @@ def _callbacks(
         progress = RunProgress(progress_path(out, spec), spec.timesteps, counter, "timesteps")
     callbacks: list[BaseCallback] = [counter, *mission_callbacks(model), progress]
     if checkpoint_every:
-        callbacks.append(PeriodicCheckpoint(run_folder(out, spec), checkpoint_every, identity, counter))
+        callbacks.append(PeriodicCheckpoint(run_folder(out, spec), checkpoint_every, identity, counter, exact))
     return counter, callbacks, total_timesteps
 
 
@@ -350,11 +385,13 @@ def run_one(
     Without ``resume``, leftovers of an interrupted attempt are removed and the run starts afresh (so that a
     run's result depends on its seed only). With ``resume``, a finished run's result is returned as is, one
     interrupted in its evaluations is evaluated again (its trained ``model.zip``, :data:`TRAINED_RECORD`), and one
-    interrupted in training continues from its last checkpoint (model, replay buffer, action noise and curriculum
-    state; not the environment's random state, so a resumed run is not bit-identical to an uninterrupted one).
-    With ``retest`` alone, only a run interrupted in its evaluations is taken up (evaluated again, as with
-    ``resume``) and only when its training ran from the start in one go, so that the result is the uninterrupted
-    run's; any other leftover is removed as without ``resume``.
+    interrupted in training continues from its last checkpoint: model, replay buffer, action noise, curriculum
+    state and the training state (:mod:`.training_state`: the env as it was and the random generators), so that
+    it trains on bit for bit as the uninterrupted run (a checkpoint of an earlier version, without the training
+    state, resumes on a fresh env). With ``retest`` alone, a run is taken up only where the result stays the
+    uninterrupted run's: one interrupted in its evaluations is evaluated again, one interrupted in training goes on
+    from a checkpoint of a training that was the uninterrupted run's so far (``same_as_uninterrupted`` in
+    ``checkpoint.json``); any other leftover is removed as without ``resume``.
 
     :param spec: the run
     :param out: output folder
@@ -364,8 +401,8 @@ def run_one(
         writes into another run's logs
     :param checkpoint_every: save a checkpoint every this many episodes (None: none)
     :param resume: reuse a finished result or the last checkpoint (both checked against :func:`run_identity`)
-    :param retest: evaluate a run interrupted in its evaluations again instead of training it again (what
-        ``compare`` and ``reproduce`` do; implied by ``resume``)
+    :param retest: take up a run interrupted in its evaluations, or in training with a checkpoint, where its
+        result stays the uninterrupted run's (what ``compare`` and ``reproduce`` do; implied by ``resume``)
     :param threads: torch threads (None: torch's default; 1 in parallel workers)
     :param progress_bar: show SB3's progress bar
     :param verbose: SB3 verbosity
@@ -404,9 +441,19 @@ def run_one(
             warn_other_versions({spec.run_id: checkpoint}, out, reused="resumed")
     elif retest:
         trained = _uninterrupted_training(run_dir, identity, spec, verbose)
+        if trained is None:
+            checkpoint = _uninterrupted_checkpoint(run_dir, identity)
+            if checkpoint is not None:
+                warn_other_versions({spec.run_id: checkpoint}, out, reused="resumed")
     if trained is not None:  # interrupted in its evaluations: the trained model is evaluated, not trained again
         remove_temp_files(run_dir)  # e.g. of a result.json whose writer was killed
         return _record_result(spec, out, *trained, n_trajectories)
+    built = None
+    if checkpoint is not None and not resume:  # retest: a checkpoint that cannot be loaded is a leftover
+        try:
+            built = _build_model(spec, run_dir, checkpoint, identity, verbose)
+        except DamagedRecordError:
+            checkpoint = None
     tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
     with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):
         if checkpoint is None:  # leftovers of an interrupted attempt: start afresh
@@ -416,7 +463,7 @@ def run_one(
         remove_temp_files(run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
         return _train_and_record(
-            spec, out, tb_dir, identity, checkpoint, n_trajectories, checkpoint_every, progress_bar, verbose
+            spec, out, tb_dir, identity, checkpoint, n_trajectories, checkpoint_every, progress_bar, verbose, built
         )
 
 
@@ -430,16 +477,26 @@ def _train_and_record(
     checkpoint_every: int | None,
     progress_bar: bool,
     verbose: int,
+    built: tuple[Any, Any, int] | None = None,
 ) -> dict[str, Any]:
-    """The steps of :func:`run_one` once its folders are ready: build, train, save, evaluate, write the result."""
+    """
+    The steps of :func:`run_one` once its folders are ready: build, train, save, evaluate, write the result.
+
+    :param built: :func:`_build_model`'s env, model and episodes trained, when already built (None: built here)
+    """
     run_dir = run_folder(out, spec)
-    env, model, done_episodes = _build_model(spec, run_dir, checkpoint, identity, verbose)
+    env, model, done_episodes = _build_model(spec, run_dir, checkpoint, identity, verbose) if built is None else built
     # every algorithm's zip, its checkpoints' too, says what it was trained on (DTDPG's save does it too)
     env_settings.record(model)
     start_timesteps = int(model.num_timesteps) if checkpoint is not None else 0  # learn() resets a new model's count
     model.set_logger(run_logger(tb_dir, verbose, start_timesteps if checkpoint is not None else None))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
-    counter, callbacks, total_timesteps = _callbacks(spec, out, model, max_steps, done_episodes, identity, checkpoint_every)
+    exact = checkpoint is None or (
+        checkpoint.get("same_as_uninterrupted") is True and (checkpoint["path"] / training_state.TRAINING_STATE).is_file()
+    )
+    counter, callbacks, total_timesteps = _callbacks(
+        spec, out, model, max_steps, done_episodes, identity, checkpoint_every, exact
+    )
     try:
         train_s = _train(model, callbacks, total_timesteps, checkpoint is not None, progress_bar)
     except Exception as error:  # not KeyboardInterrupt: an interrupted run keeps its checkpoint
@@ -458,6 +515,7 @@ def _train_and_record(
             "timesteps": int(model.num_timesteps),
             "episodes": int(counter.n_episodes),
             "resumed_at_episode": done_episodes if checkpoint is not None else None,
+            "same_as_uninterrupted": exact,  # started afresh, or resumed from checkpoints that kept everything
             "wall_s": train_s,  # of this process's training (a resumed run: of its resumed part)
             # the steps trained in this process over wall_s (a resumed run: not the steps before its checkpoint)
             "steps_per_s": (model.num_timesteps - start_timesteps) / max(train_s, 1e-9),
@@ -484,7 +542,9 @@ def _uninterrupted_training(
     try:
         trained = read_trained(run_dir, identity)
         train = None if trained is None else trained.get("train")
-        if not isinstance(train, dict) or train.get("resumed_at_episode") is not None:
+        if not isinstance(train, dict):
+            return None
+        if train.get("resumed_at_episode") is not None and train.get("same_as_uninterrupted") is not True:
             return None
         before = trained.get("before_transfer_models")  # recorded when the training ended
         if before != [path.name for path in _before_transfer_models(run_dir)]:
@@ -494,6 +554,23 @@ def _uninterrupted_training(
         return _load_trained(spec, run_dir, verbose), trained
     except (RunMismatchError, DamagedRecordError):
         return None
+
+
+def _uninterrupted_checkpoint(run_dir: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
+    """
+    :return: the run's last checkpoint when resuming from it gives the uninterrupted run's training bit for bit
+        (None: none, or leftovers that are not such a checkpoint, to be removed: another run's, damaged, without a
+        training state, or of a training resumed from a checkpoint that had none)
+    """
+    try:
+        checkpoint = read_checkpoint(run_dir, identity)
+    except (RunMismatchError, DamagedRecordError):
+        return None
+    if checkpoint is None or checkpoint.get("same_as_uninterrupted") is not True:
+        return None
+    if not (checkpoint["path"] / training_state.TRAINING_STATE).is_file():
+        return None
+    return checkpoint
 
 
 def _load_trained(spec: RunSpec, run_dir: Path, verbose: int) -> Any:
@@ -533,7 +610,7 @@ def _record_result(spec: RunSpec, out: Path, model: Any, trained: dict[str, Any]
 
 def _worker(spec: RunSpec, out: str, identity: dict[str, Any]) -> tuple[str, float]:
     start = time.perf_counter()
-    run_one(spec, out, identity=identity, retest=True)
+    run_one(spec, out, identity=identity, retest=True, checkpoint_every=CHECKPOINT_EVERY)
     return spec.run_id, time.perf_counter() - start
 
 
@@ -548,9 +625,10 @@ def run_many(
     Run the unfinished runs of ``specs`` in parallel worker processes (spawned, one torch thread each).
 
     Runs whose result file exists are skipped (resumable), after checking that the stored result is this run's
-    (:func:`run_identity`). Each run writes its files as soon as it ends, so an interruption loses only the
-    runs in progress: they start afresh next time, except a run interrupted in its evaluations, which is evaluated
-    again (``run_one``'s ``retest``). Hold :func:`output_lock` around a job that calls this.
+    (:func:`run_identity`). Each run writes its files as soon as it ends and a checkpoint every
+    :data:`CHECKPOINT_EVERY` episodes, so an interruption loses only the episodes since the runs' last checkpoints:
+    the next job goes on from them, bit for bit as the uninterrupted runs, and evaluates a run interrupted in its
+    evaluations again (``run_one``'s ``retest``). Hold :func:`output_lock` around a job that calls this.
 
     :param specs: the runs
     :param out: output folder

@@ -23,6 +23,8 @@ from sb3_dtdpg.common.checks import shortened
 from sb3_dtdpg.common.files import atomic_write, write_json
 from sb3_dtdpg.experiments.provenance import made_with, warn_other_versions
 from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identity, run_identity
+from sb3_dtdpg.experiments.training_state import TRAINING_STATE
+from sb3_dtdpg.experiments.training_state import save as save_training_state
 
 __all__ = [
     "FOLDER_LOCK",
@@ -63,6 +65,7 @@ RUN_RECORDS: tuple[str, ...] = (
     TRAINED_RECORD,
     "model.zip",
     "replay_buffer.pkl",
+    TRAINING_STATE,
 )
 
 
@@ -407,12 +410,18 @@ def _csv_rows_until(path: Path, step: int) -> tuple[list[str], list[str]] | None
     return header, rows
 
 
-def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episodes: int) -> Path:
+def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episodes: int, exact: bool = True) -> Path:
     """
-    Write a checkpoint: model and replay buffer into a fresh ``checkpoints/<episodes>`` folder, then
-    ``checkpoint.json`` (atomically) pointing at it, then remove the older folders. A kill at any point leaves
-    the previous checkpoint usable.
+    Write a checkpoint: model, replay buffer and training state (:mod:`.training_state`) into a fresh
+    ``checkpoints/<episodes>`` folder, then ``checkpoint.json`` (atomically) pointing at it, then remove the older
+    folders. A kill at any point leaves the previous checkpoint usable.
 
+    :param model: the model, between two iterations of its ``learn`` loop
+    :param run_dir: the run's folder
+    :param identity: the run's identity, recorded with the checkpoint
+    :param episodes: the episodes trained
+    :param exact: whether the training so far is the uninterrupted run's (it started afresh, or resumed from
+        an exact checkpoint), so that resuming from this one gives the uninterrupted run's training bit for bit
     :return: the checkpoint folder
     """
     folder = run_dir / "checkpoints" / f"episode_{episodes}"
@@ -420,11 +429,13 @@ def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episode
     atomic_write(folder / "model.zip", model.save)
     if getattr(model, "replay_buffer", None) is not None:
         atomic_write(folder / "replay_buffer.pkl", model.save_replay_buffer)
+    atomic_write(folder / TRAINING_STATE, lambda path: save_training_state(model, path))
     pointer = {
         "identity": identity,
         "episodes": episodes,
         "timesteps": int(model.num_timesteps),
         "folder": str(folder.relative_to(run_dir)),
+        "same_as_uninterrupted": exact,
         "made_with": made_with(),
     }
     write_json(run_dir / "checkpoint.json", pointer, indent=1)

@@ -1,0 +1,133 @@
+"""A run interrupted in training and resumed from its checkpoint trains on as the uninterrupted run would, bit for
+bit: ``sb3-dtdpg train``'s resume, and the runs of ``compare``/``reproduce``, which go on from their checkpoints."""
+
+import dataclasses
+import json
+
+import pytest
+import torch as th
+from stable_baselines3.common.save_util import load_from_zip_file
+
+from sb3_dtdpg.experiments import runs
+from sb3_dtdpg.experiments.runs import PeriodicCheckpoint, RunSpec, prepare_run, run_one
+from sb3_dtdpg.experiments.training_state import TRAINING_STATE
+
+# 6 episodes of 60 steps at most; the paper's settings learn from step 100, DT-DPG's transfer comes after episode 4
+DDPG = RunSpec("ddpg", "noma", 0, 6, scenario="small", eval_episodes=2, observation="paper")
+DTDPG = dataclasses.replace(DDPG, algo="dtdpg")
+
+
+def _same(a, b) -> bool:
+    """Whether two nested records of tensors, arrays and numbers are equal, bit for bit."""
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[key], b[key]) for key in a)
+    if isinstance(a, list | tuple):
+        return isinstance(b, list | tuple) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, th.Tensor):
+        return isinstance(b, th.Tensor) and a.dtype == b.dtype and a.shape == b.shape and bool((a == b).all())
+    return a == b
+
+
+def _trained(out, spec):
+    """:return: the run's result and its model's weights and optimizer states"""
+    run_dir = out / "runs" / spec.run_id
+    _, params, _ = load_from_zip_file(run_dir / "model.zip", device="cpu")
+    return json.loads((run_dir / "result.json").read_text()), params
+
+
+def _interrupt_at(patch, episodes: int) -> None:
+    """Make training raise ``KeyboardInterrupt`` right after its checkpoint at ``episodes`` or later."""
+    original = runs.PeriodicCheckpoint._on_rollout_start
+
+    def interrupt(self):
+        due = self._due
+        original(self)
+        if due and self.counter.n_episodes >= episodes:
+            raise KeyboardInterrupt
+
+    patch.setattr(PeriodicCheckpoint, "_on_rollout_start", interrupt)
+
+
+def _assert_same_training(resumed, uninterrupted, resumed_params, uninterrupted_params):
+    assert _same(resumed_params, uninterrupted_params)  # weights, target networks, Adam's moments and step counts
+    assert resumed["train"]["timesteps"] == uninterrupted["train"]["timesteps"]
+    assert json.dumps(resumed["eval"], sort_keys=True) == json.dumps(uninterrupted["eval"], sort_keys=True)
+    assert resumed["curriculum_state"] == uninterrupted["curriculum_state"]
+
+
+@pytest.mark.parametrize("spec", [DDPG, DTDPG], ids=["ddpg", "dtdpg"])
+def test_a_run_resumed_twice_trains_the_uninterrupted_runs_weights(tmp_path, monkeypatch, spec):
+    run_one(spec, tmp_path / "a")  # no checkpoints
+    uninterrupted, uninterrupted_params = _trained(tmp_path / "a", spec)
+    for stop in (2, 4):  # the second attempt resumes from the first's checkpoint, the third from the second's
+        with monkeypatch.context() as patch:
+            _interrupt_at(patch, stop)
+            with pytest.raises(KeyboardInterrupt):
+                run_one(spec, tmp_path / "b", resume=True, checkpoint_every=2)
+        checkpoint = json.loads((tmp_path / "b" / "runs" / spec.run_id / "checkpoint.json").read_text())
+        assert checkpoint["episodes"] == stop and checkpoint["same_as_uninterrupted"] is True
+    run_one(spec, tmp_path / "b", resume=True, checkpoint_every=2)
+    resumed, resumed_params = _trained(tmp_path / "b", spec)
+    assert resumed["train"]["resumed_at_episode"] == 4 and resumed["train"]["same_as_uninterrupted"] is True
+    if spec.algo == "dtdpg":  # the transfer came between two checkpoints
+        assert [entry["phase"] for entry in resumed["curriculum_state"]["history"]] == ["destination", "mqi"]
+        assert resumed["curriculum_state"]["history"][0]["episodes"] == 4
+    _assert_same_training(resumed, uninterrupted, resumed_params, uninterrupted_params)
+
+
+def test_a_compare_run_interrupted_in_training_goes_on_from_its_checkpoint(tmp_path, monkeypatch):
+    monkeypatch.setattr(runs, "CHECKPOINT_EVERY", 2)
+    with monkeypatch.context() as patch:
+        _interrupt_at(patch, 2)
+        with pytest.raises(KeyboardInterrupt):
+            runs._worker(DTDPG, str(tmp_path / "b"), prepare_run(DTDPG))
+    runs._worker(DTDPG, str(tmp_path / "b"), prepare_run(DTDPG))
+    resumed, resumed_params = _trained(tmp_path / "b", DTDPG)
+    assert resumed["train"]["resumed_at_episode"] == 2  # was: trained again from its start; the transfer came after
+    run_one(DTDPG, tmp_path / "a")
+    uninterrupted, uninterrupted_params = _trained(tmp_path / "a", DTDPG)
+    _assert_same_training(resumed, uninterrupted, resumed_params, uninterrupted_params)
+    assert json.dumps(resumed["before_transfer"], sort_keys=True) == json.dumps(
+        uninterrupted["before_transfer"], sort_keys=True
+    )
+
+
+def _checkpoint_of_an_earlier_version(tmp_path, monkeypatch):
+    """A run interrupted after its checkpoint at episode 2, made as the versions before the training state did."""
+    with monkeypatch.context() as patch:
+        _interrupt_at(patch, 2)
+        with pytest.raises(KeyboardInterrupt):
+            run_one(DDPG, tmp_path, resume=True, checkpoint_every=2)
+    run_dir = tmp_path / "runs" / DDPG.run_id
+    pointer = json.loads((run_dir / "checkpoint.json").read_text())
+    (run_dir / pointer["folder"] / TRAINING_STATE).unlink()
+    del pointer["same_as_uninterrupted"]
+    (run_dir / "checkpoint.json").write_text(json.dumps(pointer))
+    return run_dir
+
+
+def test_train_resumes_a_checkpoint_without_its_training_state_on_a_fresh_env_and_says_so(tmp_path, monkeypatch):
+    run_dir = _checkpoint_of_an_earlier_version(tmp_path, monkeypatch)
+    with monkeypatch.context() as patch:
+        _interrupt_at(patch, 4)
+        with pytest.raises(KeyboardInterrupt):
+            run_one(DDPG, tmp_path, resume=True, checkpoint_every=2)
+    # the checkpoints that follow are not the uninterrupted run's either
+    assert json.loads((run_dir / "checkpoint.json").read_text())["same_as_uninterrupted"] is False
+    result = run_one(DDPG, tmp_path, resume=True, checkpoint_every=2)
+    assert result["train"]["resumed_at_episode"] == 4 and result["train"]["same_as_uninterrupted"] is False
+
+
+def test_a_compare_run_trains_afresh_over_a_checkpoint_without_its_training_state(tmp_path, monkeypatch):
+    _checkpoint_of_an_earlier_version(tmp_path, monkeypatch)
+    resumed = []
+
+    def train(model, callbacks, total_timesteps, was_resumed, progress_bar):
+        resumed.append(was_resumed)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runs, "_train", train)
+    with pytest.raises(KeyboardInterrupt):
+        runs._worker(DDPG, str(tmp_path), prepare_run(DDPG))
+    assert resumed == [False]
+    assert not (tmp_path / "runs" / DDPG.run_id / "checkpoint.json").exists()  # the leftovers were removed
