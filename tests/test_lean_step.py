@@ -201,6 +201,26 @@ def test_lean_caches_are_not_saved(tmp_path: Path) -> None:
     assert getattr(loaded, CACHE_ATTRIBUTE).valid_for(loaded)
 
 
+@pytest.mark.parametrize(("lean_class", "sb3_class"), [(LeanDDPG, DDPG), (LeanTD3, TD3)])
+def test_sb3_loads_a_lean_baselines_n_step_model_without_a_warning(tmp_path: Path, lean_class, sb3_class) -> None:
+    """SB3 picks ``NStepReplayBuffer`` for ``n_steps > 1`` and saves it; its own ``load`` then warns that n_steps is
+    ignored (DLR-RM/stable-baselines3#2275). The lean baselines leave SB3's own choice out of the zip: SB3 chooses
+    it again on load, silently, with the same returns; a buffer class given by hand is saved."""
+    import warnings
+
+    from stable_baselines3.common.buffers import NStepReplayBuffer, ReplayBuffer
+
+    env = TimeLimit(PhasedPointEnv(), 20)
+    lean_class("MlpPolicy", env, n_steps=3, gamma=0.9, learning_starts=10, seed=0).save(tmp_path / "auto")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loaded = sb3_class.load(tmp_path / "auto", env=env)
+    assert type(loaded.replay_buffer) is NStepReplayBuffer
+    assert (loaded.replay_buffer.n_steps, loaded.replay_buffer.gamma) == (3, 0.9)
+    lean_class("MlpPolicy", env, replay_buffer_class=ReplayBuffer, seed=0).save(tmp_path / "given")
+    assert sb3_class.load(tmp_path / "given", env=env).replay_buffer_class is ReplayBuffer
+
+
 def test_polyak_on_flat_buffers_follows_the_parameters() -> None:
     """The targets' Polyak update runs on flat buffers holding the parameters; a parameter given new memory
     (``.data``, as ``vector_to_parameters`` does) is gathered again, so the targets still follow the online

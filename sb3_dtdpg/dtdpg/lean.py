@@ -20,6 +20,7 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3 import DDPG, TD3
+from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.preprocessing import is_image_space
 from torch import nn
@@ -511,7 +512,23 @@ class LeanStep:
         return model.policy.unscale_action(scaled_action), scaled_action
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), CACHE_ATTRIBUTE]  # type: ignore[misc]
+        excluded = [*super()._excluded_save_params(), CACHE_ATTRIBUTE]  # type: ignore[misc]
+        if _buffer_of_sb3s_choice(self):
+            # Left out, SB3's load chooses the same buffer again; saved, SB3 hands it back as a custom class and
+            # warns that n_steps is ignored on every load (DLR-RM/stable-baselines3#2275)
+            excluded.append("replay_buffer_class")
+        return excluded
+
+
+def _buffer_of_sb3s_choice(model: Any) -> bool:
+    """:return: whether the model's replay buffer class is the one SB3 picks for its ``n_steps`` (and ``gamma``)"""
+    kwargs = model.replay_buffer_kwargs or {}
+    return (
+        model.replay_buffer_class is NStepReplayBuffer
+        and model.n_steps > 1
+        and kwargs.get("n_steps") == model.n_steps
+        and kwargs.get("gamma") == model.gamma
+    )
 
 
 class LeanDDPG(LeanStep, DDPG):
