@@ -86,6 +86,7 @@ class RunReport:
     """
 
     finished: list[str] = field(default_factory=list)
+    resumed: list[str] = field(default_factory=list)  #: of the finished, those that went on from a checkpoint
     skipped: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)
     wall_s: float = math.nan
@@ -103,9 +104,14 @@ class RunReport:
         )
 
     def counts(self) -> str:
-        """:return: e.g. ``"4 runs, 2 already done, 1 failed"`` (the failed only when runs failed)"""
+        """
+        :return: e.g. ``"4 runs (1 resumed from its checkpoint), 2 already done, 1 failed"`` (the resumed and the
+            failed only when there are some)
+        """
+        n_resumed = len(self.resumed)
+        resumed = f" ({n_resumed} resumed from {'its checkpoint' if n_resumed == 1 else 'their checkpoints'})"
         failed = f", {len(self.failed)} failed" if self.failed else ""
-        return f"{len(self.finished)} runs, {len(self.skipped)} already done{failed}"
+        return f"{len(self.finished)} runs{resumed if n_resumed else ''}, {len(self.skipped)} already done{failed}"
 
     def incomplete_note(self, run_ids: Iterable[str] | None = None) -> str | None:
         """

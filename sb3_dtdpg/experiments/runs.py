@@ -660,4 +660,14 @@ def run_many(
     start = time.perf_counter()
     run_in_pool(_worker, todo, out, n_workers, report, progress=progress, on_finish=on_finish)
     report.wall_s = time.perf_counter() - start
+    finished = set(report.finished)
+    report.resumed = [spec.run_id for spec in specs if spec.run_id in finished and _resumed(out, spec)]
     return report
+
+
+def _resumed(out: str | Path, spec: RunSpec) -> bool:
+    """:return: whether the run's stored result went on from a checkpoint"""
+    try:
+        return json.loads(result_path(out, spec).read_text())["train"]["resumed_at_episode"] is not None
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
