@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.cli_parser import DEFAULT_ENV_ID, PRESETS, build_parser
+from sb3_dtdpg.common.warning_lines import warnings_as_lines
 
 __all__ = ["build_parser", "main"]
 
@@ -689,7 +690,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unknown:  # argparse reports these with the top-level usage; the subcommand's is the one that helps
         args.error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
-        return _commands()[args.command](args)
+        with warnings_as_lines(args.prog):
+            return _commands()[args.command](args)
     except KeyboardInterrupt:
         if args.command in ("compare", "reproduce"):  # jobs of runs, each written as it finishes
             from sb3_dtdpg.experiments.budgets import CHECKPOINT_EVERY

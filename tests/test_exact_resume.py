@@ -9,7 +9,7 @@ import torch as th
 from stable_baselines3.common.save_util import load_from_zip_file
 
 from sb3_dtdpg.experiments import runs
-from sb3_dtdpg.experiments.runs import PeriodicCheckpoint, RunSpec, prepare_run, run_one
+from sb3_dtdpg.experiments.runs import PeriodicCheckpoint, RunSpec, prepare_run, result_path, run_one
 from sb3_dtdpg.experiments.training_state import TRAINING_STATE
 
 # 6 episodes of 60 steps at most; the paper's settings learn from step 100, DT-DPG's transfer comes after episode 4
@@ -82,6 +82,7 @@ def test_a_compare_run_interrupted_in_training_goes_on_from_its_checkpoint(tmp_p
         with pytest.raises(KeyboardInterrupt):
             runs._worker(DTDPG, str(tmp_path / "b"), prepare_run(DTDPG))
     report = runs.run_many([DTDPG], tmp_path / "b", n_workers=1, progress=False)  # as compare runs it again
+    assert not report.failed
     assert report.resumed == [DTDPG.run_id] and report.counts() == "1 runs (1 resumed from its checkpoint), 0 already done"
     resumed, resumed_params = _trained(tmp_path / "b", DTDPG)
     assert resumed["train"]["resumed_at_episode"] == 2  # was: trained again from its start; the transfer came after
@@ -132,3 +133,39 @@ def test_a_compare_run_trains_afresh_over_a_checkpoint_without_its_training_stat
         runs._worker(DDPG, str(tmp_path), prepare_run(DDPG))
     assert resumed == [False]
     assert not (tmp_path / "runs" / DDPG.run_id / "checkpoint.json").exists()  # the leftovers were removed
+
+
+def test_a_compare_run_whose_checkpoint_cannot_be_loaded_trains_afresh_and_says_so(tmp_path, monkeypatch):
+    monkeypatch.setattr(runs, "CHECKPOINT_EVERY", 2)
+    with monkeypatch.context() as patch:
+        _interrupt_at(patch, 2)
+        with pytest.raises(KeyboardInterrupt):
+            runs._worker(DDPG, str(tmp_path), prepare_run(DDPG))
+    run_dir = tmp_path / "runs" / DDPG.run_id
+    (run_dir / json.loads((run_dir / "checkpoint.json").read_text())["folder"] / TRAINING_STATE).write_bytes(b"damaged")
+    with pytest.warns(
+        UserWarning, match=r"ddpg_noma_s0: its checkpoint is not resumed, the run trains afresh: the checkpoint"
+    ):
+        runs._worker(DDPG, str(tmp_path), prepare_run(DDPG))
+    assert json.loads(result_path(tmp_path, DDPG).read_text())["train"]["resumed_at_episode"] is None
+
+
+def test_a_checkpoint_resumes_in_a_process_where_gymnasiums_time_limit_is_its_own(tmp_path, monkeypatch):
+    """Importing the RL Zoo replaces Gymnasium's ``TimeLimit`` in its modules. A checkpoint written in such a process
+    (the env's ``TimeLimit`` then cannot be found by its name) resumes in a job's worker, which has the original:
+    pickled whole, the wrapper would travel by value and fail there (``TypeError: super(type, obj): ...``)."""
+    import gymnasium.wrappers
+    import gymnasium.wrappers.common
+
+    class ReplacedTimeLimit(gymnasium.wrappers.common.TimeLimit):
+        pass
+
+    monkeypatch.setattr(runs, "CHECKPOINT_EVERY", 2)
+    with monkeypatch.context() as patch:
+        for module in (gymnasium.wrappers, gymnasium.wrappers.common):  # as rl_zoo3.gym_patches does
+            patch.setattr(module, "TimeLimit", ReplacedTimeLimit)
+        _interrupt_at(patch, 2)
+        with pytest.raises(KeyboardInterrupt):
+            runs._worker(DDPG, str(tmp_path), prepare_run(DDPG))
+    report = runs.run_many([DDPG], tmp_path, n_workers=1, progress=False)
+    assert report.failed == {} and report.resumed == [DDPG.run_id]

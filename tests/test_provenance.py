@@ -61,3 +61,25 @@ def test_a_reused_result_of_other_versions_is_warned_about_and_one_of_these_is_n
     with warnings.catch_warnings():
         warnings.simplefilter("error", OtherVersionsWarning)
         run_many([SPEC, other], tmp_path, n_workers=1, progress=False)
+
+
+def test_the_command_line_shows_a_warning_as_one_line(tmp_path):
+    """``sb3-dtdpg`` shows warnings as its own notices, ``<command>: warning: <message>`` (was: Python's
+    ``.../provenance.py:<line>: OtherVersionsWarning: ...`` and the source line that raised it)."""
+    import os
+    import subprocess
+    import sys
+
+    run_one(SPEC, tmp_path)
+    _rewrite(result_path(tmp_path, SPEC), _other_torch)
+    argv = ["train", "--algo", "ddpg", "--preset", "paper", "--observation", "paper", "--scenario", "small"]
+    argv += ["--episodes", "3", "--eval-episodes", "1", "--eval-seed", "10000", "--no-progress", "--out", str(tmp_path)]
+    env = {**os.environ, "PYTHONWARNINGS": "ignore::DeprecationWarning,ignore::FutureWarning"}
+    done = subprocess.run([sys.executable, "-m", "sb3_dtdpg.cli", *argv], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    assert [line for line in lines if "warning" in line.lower()] == [
+        f"sb3-dtdpg train: warning: OtherVersionsWarning: 1 of 1 stored runs in {tmp_path} were made with other "
+        f"library versions (torch 2.4.0, now {th.__version__}: 1 run); they are reused as they are. Use a new output "
+        "folder to make every run with the running versions."
+    ]

@@ -231,7 +231,37 @@ def test_run_many_uses_the_pool_that_ends_with_its_parent():
     pool = worker_pool(1)
     try:
         assert pool.submit(os.getppid).result() == os.getpid()
-        assert pool._initializer is pool_module._die_with_parent
+        assert pool._initializer is pool_module._start_worker and pool._initargs[0] == os.getpid()
+    finally:
+        pool.shutdown()
+
+
+def _format_warning(*arguments):
+    """:return: the warning's text as this process formats it (run in a worker)"""
+    import warnings
+
+    return warnings.formatwarning(*arguments)
+
+
+def test_the_workers_show_warnings_as_the_command_line_does():
+    """The command line shows warnings as one line each (``sb3-dtdpg compare: warning: ...``), its job's spawned
+    workers too (was: Python's ``<file>:<line>: <Category>: ...`` and the source line, from the workers)."""
+    import warnings
+
+    from sb3_dtdpg.common.warning_lines import warnings_as_lines
+
+    arguments = ("runs of other versions", UserWarning, "x.py", 1)
+    with warnings_as_lines("sb3-dtdpg compare"):
+        pool = worker_pool(1)
+        try:
+            assert pool.submit(_format_warning, *arguments).result() == (
+                "sb3-dtdpg compare: warning: runs of other versions\n"
+            )
+        finally:
+            pool.shutdown()
+    pool = worker_pool(1)  # outside the command line: Python's format
+    try:
+        assert pool.submit(_format_warning, *arguments).result() == warnings.formatwarning(*arguments)
     finally:
         pool.shutdown()
 

@@ -16,6 +16,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -25,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.common.checks import shortened
+from sb3_dtdpg.common.warning_lines import WarningLines
 from sb3_dtdpg.experiments.specs import RunSpec
 from sb3_dtdpg.experiments.storage import read_progress
 
@@ -54,16 +56,28 @@ def _die_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
+def _start_worker(parent_pid: int, formatwarning: WarningLines | None) -> None:
+    """
+    Worker initialiser: :func:`_die_with_parent`, and the parent's way of showing warnings when it shows them as
+    :class:`~sb3_dtdpg.common.warning_lines.WarningLines` (the command line does).
+    """
+    _die_with_parent(parent_pid)
+    if formatwarning is not None:
+        warnings.formatwarning = formatwarning  # type: ignore[assignment]
+
+
 def worker_pool(n_workers: int) -> ProcessPoolExecutor:
     """
     The process pool of :func:`run_in_pool`: spawned processes (no state inherited from the parent) that end when
-    the parent process ends, so that killing a job never leaves workers running its queued runs.
+    the parent process ends, so that killing a job never leaves workers running its queued runs, and show warnings
+    as the parent does where it shows them as one line each (:mod:`sb3_dtdpg.common.warning_lines`).
 
     :param n_workers: number of processes
     :return: the executor (in a ``with`` block left by an exception, its workers are killed and waited for)
     """
     context = multiprocessing.get_context("spawn")
-    return _WorkerPool(max_workers=n_workers, mp_context=context, initializer=_die_with_parent, initargs=(os.getpid(),))
+    lines = warnings.formatwarning if isinstance(warnings.formatwarning, WarningLines) else None
+    return _WorkerPool(max_workers=n_workers, mp_context=context, initializer=_start_worker, initargs=(os.getpid(), lines))
 
 
 class _WorkerPool(ProcessPoolExecutor):

@@ -24,6 +24,7 @@ import json
 import os
 import shutil
 import time
+import warnings
 import zipfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -206,22 +207,22 @@ def _resume_model(
 ) -> tuple[Any, Any, int]:
     """:func:`_build_model` from a checkpoint"""
     from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
     from sb3_dtdpg.baselines import load_model, make_env
 
     pointer, folder = run_dir / "checkpoint.json", checkpoint["path"]
     buffer, state_file = folder / "replay_buffer.pkl", folder / training_state.TRAINING_STATE
-    env, vec_env = None, None
+    env, state = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs), None
     try:
         try:
             if state_file.exists():  # the env as it was (the model loads without one: loading would seed it)
                 state = training_state.load(state_file)
-                vec_env = state["env"]
-                env = vec_env.envs[0]
                 model = load_model(spec.algo, folder / "model.zip", device="cpu", verbose=verbose, **phase_files)
+                vec_env = DummyVecEnv([lambda: env])  # as SB3 wraps the run's env (Monitor-wrapped already)
+                training_state.restore_env(vec_env, state["env"])
                 model.set_env(vec_env, force_reset=False)
             else:  # a checkpoint of an earlier version: a fresh env
-                env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
                 model = load_model(spec.algo, folder / "model.zip", env=env, device="cpu", verbose=verbose, **phase_files)
             if buffer.exists():
                 model.load_replay_buffer(buffer)
@@ -237,12 +238,9 @@ def _resume_model(
             )
         _check_checkpoint_model(model, checkpoint, identity, pointer)
     except DamagedRecordError:
-        for opened in (vec_env, env):
-            if opened is not None:
-                opened.close()
-                break
+        env.close()
         raise
-    if vec_env is not None:
+    if state is not None:
         training_state.restore_generators(model, state["generators"])
     return env, model, int(checkpoint["episodes"])
 
@@ -452,7 +450,8 @@ def run_one(
     if checkpoint is not None and not resume:  # retest: a checkpoint that cannot be loaded is a leftover
         try:
             built = _build_model(spec, run_dir, checkpoint, identity, verbose)
-        except DamagedRecordError:
+        except DamagedRecordError as error:
+            warnings.warn(f"{spec.run_id}: its checkpoint is not resumed, the run trains afresh: {error}", stacklevel=2)
             checkpoint = None
     tb_dir = tensorboard_folder(out, spec, tensorboard_dir)
     with tensorboard_claim(tb_dir, out, spec.run_id, fresh=checkpoint is None):

@@ -1,10 +1,16 @@
 """What a checkpoint keeps beyond the model and its replay buffer, so that a run resumed from it trains on
-exactly as the uninterrupted run would: the training env as it is (its random generator, the mission in
-progress, its wrappers' counters) and the random generators SB3 draws from (numpy's global one: replay sampling
-and the exploration noise; Python's and torch's; the action space's, which draws the warm-up actions).
+exactly as the uninterrupted run would: the training env as it is (the env itself with its random generator and the
+mission in progress, the counters of its wrappers and of its ``DummyVecEnv``) and the random generators SB3 draws
+from (numpy's global one: replay sampling and the exploration noise; Python's and torch's; the action space's,
+which draws the warm-up actions).
 
 A checkpoint is taken between two iterations of SB3's ``learn`` loop (at the start of a rollout), so the model's
 ``_last_obs`` is the env's current observation and nothing else is half done.
+
+The wrappers are kept as their attributes, not as objects: a resumed run builds its env as the run did and takes
+the attributes back (:func:`restore_env`). Pickled whole, a wrapper whose class a library has replaced in its
+module (the RL Zoo replaces Gymnasium's ``TimeLimit`` when it is imported) would travel by value and fail in a
+process without that replacement.
 """
 
 from __future__ import annotations
@@ -14,10 +20,12 @@ from pathlib import Path
 from typing import Any
 
 import cloudpickle
+import gymnasium as gym
 import numpy as np
 import torch as th
+from stable_baselines3.common.vec_env import DummyVecEnv
 
-__all__ = ["TRAINING_STATE", "capture", "load", "restore_generators", "save"]
+__all__ = ["TRAINING_STATE", "capture", "env_state", "load", "restore_env", "restore_generators", "save"]
 
 #: The file of a checkpoint folder that holds the training state (next to ``model.zip`` and ``replay_buffer.pkl``).
 TRAINING_STATE = "training_state.pkl"
@@ -25,11 +33,11 @@ TRAINING_STATE = "training_state.pkl"
 
 def capture(model: Any) -> dict[str, Any]:
     """
-    :param model: an SB3 model between two iterations of its ``learn`` loop
-    :return: its training env and the random generators' states
+    :param model: an SB3 model between two iterations of its ``learn`` loop, training on a ``DummyVecEnv``
+    :return: its training env's state (:func:`env_state`) and the random generators' states
     """
     return {
-        "env": model.get_env(),
+        "env": env_state(model.get_env()),
         "generators": {
             "numpy": np.random.get_state(),
             "python": random.getstate(),
@@ -37,6 +45,56 @@ def capture(model: Any) -> dict[str, Any]:
             "action_space": model.action_space.np_random.bit_generator.state,
         },
     }
+
+
+def env_state(vec_env: DummyVecEnv) -> dict[str, Any]:
+    """
+    :param vec_env: a ``DummyVecEnv``
+    :return: its attributes but its envs, and per env the attributes of each wrapper (outermost first) and the
+        unwrapped env itself
+    :raises TypeError: for another kind of vector env
+    """
+    if not isinstance(vec_env, DummyVecEnv):
+        raise TypeError(f"a training state keeps the envs of a DummyVecEnv, not of a {type(vec_env).__name__}")
+    envs = []
+    for env in vec_env.envs:
+        wrappers = []
+        while isinstance(env, gym.Wrapper):
+            wrappers.append({name: value for name, value in vars(env).items() if name != "env"})
+            env = env.env
+        envs.append({"wrappers": wrappers, "env": env})
+    return {"vec_env": {name: value for name, value in vars(vec_env).items() if name != "envs"}, "envs": envs}
+
+
+def restore_env(vec_env: DummyVecEnv, state: dict[str, Any]) -> None:
+    """
+    Put an :func:`env_state` back into a vector env built as the saved one was: each wrapper takes its attributes
+    back, the innermost one wraps the saved env.
+
+    :param vec_env: the new ``DummyVecEnv``
+    :param state: the ``env`` of :func:`load`
+    :raises ValueError: the vector env has another number of envs or of wrappers than the saved one
+    """
+    saved_envs = state["envs"]
+    if not isinstance(vec_env, DummyVecEnv) or len(vec_env.envs) != len(saved_envs):
+        raise ValueError(f"the training state holds {len(saved_envs)} envs of a DummyVecEnv; the env to resume is other")
+    for index, saved in enumerate(saved_envs):
+        wrappers, env = [], vec_env.envs[index]
+        while isinstance(env, gym.Wrapper):
+            wrappers.append(env)
+            env = env.env
+        if len(wrappers) != len(saved["wrappers"]):
+            raise ValueError(
+                f"the training state's env {index} has {len(saved['wrappers'])} wrappers, the env to resume "
+                f"{len(wrappers)}: it was built otherwise"
+            )
+        for wrapper, attributes in zip(wrappers, saved["wrappers"], strict=True):
+            vars(wrapper).update(attributes)
+        if wrappers:
+            wrappers[-1].env = saved["env"]
+        else:
+            vec_env.envs[index] = saved["env"]
+    vars(vec_env).update(state["vec_env"])
 
 
 def save(model: Any, path: str | Path) -> None:
@@ -53,8 +111,8 @@ def save(model: Any, path: str | Path) -> None:
 def load(path: str | Path) -> dict[str, Any]:
     """
     :param path: a file written by :func:`save`
-    :return: the training state: ``env`` (the training env, to give to the loaded model with ``set_env(env,
-        force_reset=False)``) and ``generators`` (for :func:`restore_generators`)
+    :return: the training state: ``env`` (for :func:`restore_env`) and ``generators`` (for
+        :func:`restore_generators`)
     """
     with open(path, "rb") as file:
         state = cloudpickle.load(file)
