@@ -169,3 +169,19 @@ def test_a_checkpoint_resumes_in_a_process_where_gymnasiums_time_limit_is_its_ow
             runs._worker(DDPG, str(tmp_path), prepare_run(DDPG))
     report = runs.run_many([DDPG], tmp_path, n_workers=1, progress=False)
     assert report.failed == {} and report.resumed == [DDPG.run_id]
+
+
+def test_a_checkpoint_of_a_model_on_another_vector_env_keeps_no_training_state_and_says_so(tmp_path):
+    """The training state keeps a ``DummyVecEnv``'s envs; a model on another vector env (here ``VecNormalize``) gets
+    its checkpoint all the same, recorded as not the uninterrupted run's."""
+    import gymnasium as gym
+    from stable_baselines3 import DDPG as SB3DDPG
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from sb3_dtdpg.experiments.storage import read_checkpoint, save_checkpoint
+
+    model = SB3DDPG("MlpPolicy", VecNormalize(DummyVecEnv([lambda: gym.make("Pendulum-v1")])), learning_starts=10)
+    model.learn(20)
+    folder = save_checkpoint(model, tmp_path, {}, 1)
+    assert (folder / "model.zip").is_file() and not (folder / TRAINING_STATE).exists()
+    assert read_checkpoint(tmp_path)["same_as_uninterrupted"] is False

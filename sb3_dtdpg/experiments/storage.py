@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from stable_baselines3.common import logger as sb3_logger
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_dtdpg.common.checks import shortened
 from sb3_dtdpg.common.files import atomic_write, write_json
@@ -422,6 +423,7 @@ def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episode
     :param episodes: the episodes trained
     :param exact: whether the training so far is the uninterrupted run's (it started afresh, or resumed from
         an exact checkpoint), so that resuming from this one gives the uninterrupted run's training bit for bit
+        (recorded so where the training state is kept: the model trains on a ``DummyVecEnv``)
     :return: the checkpoint folder
     """
     folder = run_dir / "checkpoints" / f"episode_{episodes}"
@@ -429,13 +431,15 @@ def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episode
     atomic_write(folder / "model.zip", model.save)
     if getattr(model, "replay_buffer", None) is not None:
         atomic_write(folder / "replay_buffer.pkl", model.save_replay_buffer)
-    atomic_write(folder / TRAINING_STATE, lambda path: save_training_state(model, path))
+    kept = isinstance(model.get_env(), DummyVecEnv)  # the training state keeps a DummyVecEnv's envs only
+    if kept:
+        atomic_write(folder / TRAINING_STATE, lambda path: save_training_state(model, path))
     pointer = {
         "identity": identity,
         "episodes": episodes,
         "timesteps": int(model.num_timesteps),
         "folder": str(folder.relative_to(run_dir)),
-        "same_as_uninterrupted": exact,
+        "same_as_uninterrupted": exact and kept,
         "made_with": made_with(),
     }
     write_json(run_dir / "checkpoint.json", pointer, indent=1)
