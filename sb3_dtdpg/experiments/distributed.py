@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from sb3_dtdpg.common.files import json_default
+from sb3_dtdpg.common.warning_lines import warnings_as_lines
 from sb3_dtdpg.experiments.runs import (
     CHECKPOINT_EVERY,
     OutputBusyError,
@@ -256,7 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
             f"those of sb3-dtdpg {job}, so that it finds the same runs in --out.",
             allow_abbrev=False,
         )
-        p.set_defaults(error=p.error)
+        p.set_defaults(error=p.error, prog=p.prog)
         p.add_argument(
             "--budget", type=cli_parser.budget_name, default=budget, help=f"budget name (default: {budget}, as for the CLI)"
         )
@@ -340,7 +341,8 @@ def main(argv: list[str] | None = None) -> None:
     except ValueError as error:
         args.error(str(error))
     try:
-        done = run_study_worker(specs, args.out, args.storage, args.study_name)
+        with warnings_as_lines(args.prog):  # one line each, the workers' too, as the sb3-dtdpg commands show them
+            done = run_study_worker(specs, args.out, args.storage, args.study_name)
     except (RunMismatchError, RunDivergedError, DamagedRecordError, OutputBusyError, StudyError) as error:  # one line
         args.error(str(error))
     except KeyboardInterrupt:
