@@ -83,7 +83,7 @@ def test_a_compare_run_interrupted_in_training_goes_on_from_its_checkpoint(tmp_p
             runs._worker(DTDPG, str(tmp_path / "b"), prepare_run(DTDPG))
     report = runs.run_many([DTDPG], tmp_path / "b", n_workers=1, progress=False)  # as compare runs it again
     assert not report.failed
-    assert report.resumed == [DTDPG.run_id] and report.counts() == "1 runs (1 resumed from its checkpoint), 0 already done"
+    assert report.resumed == [DTDPG.run_id] and report.counts() == "1 run (1 resumed from its checkpoint), 0 already done"
     resumed, resumed_params = _trained(tmp_path / "b", DTDPG)
     assert resumed["train"]["resumed_at_episode"] == 2  # was: trained again from its start; the transfer came after
     run_one(DTDPG, tmp_path / "a")

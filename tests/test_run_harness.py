@@ -146,7 +146,7 @@ def test_a_job_whose_runs_failed_says_so_in_its_table_and_its_exit_status(tmp_pa
     (tmp_path / "runs" / blocked).unlink()
     run_compare(tmp_path, **job)
     assert "Incomplete" not in (tmp_path / "results.md").read_text()
-    assert " s for 1 runs, 1 already done)" in capsys.readouterr().out
+    assert " s for 1 run, 1 already done)" in capsys.readouterr().out
     # a run given twice runs once (two workers must never write one run's folder)
     spec = compare_specs(BUDGETS["_micro"], 1, algos=("ddpg",), modes=("noma",))[0]
     assert run_many([spec, spec], tmp_path, progress=False).skipped == [spec.run_id]

@@ -125,7 +125,8 @@ class RunReport:
         n_resumed = len(self.resumed)
         resumed = f" ({n_resumed} resumed from {'its checkpoint' if n_resumed == 1 else 'their checkpoints'})"
         failed = f", {len(self.failed)} failed" if self.failed else ""
-        return f"{len(self.finished)} runs{resumed if n_resumed else ''}, {len(self.skipped)} already done{failed}"
+        runs = f"{len(self.finished)} run{'' if len(self.finished) == 1 else 's'}"
+        return f"{runs}{resumed if n_resumed else ''}, {len(self.skipped)} already done{failed}"
 
     def incomplete_note(self, run_ids: Iterable[str] | None = None) -> str | None:
         """
