@@ -309,10 +309,12 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
         return 130
     summary = result["eval"]["summary"]
     resumed = result["train"].get("resumed_at_episode")
+    # False: resumed from a checkpoint without a training state (an earlier version's), on a fresh env
+    exact = result["train"].get("same_as_uninterrupted", False)
     reward_phase = result["reward_phases"]["evaluated"]  # the one it finished training on
     print(
         f"{spec.run_id}: {result['train']['timesteps']} steps, {result['train']['episodes']} episodes"
-        + (f" (resumed after episode {resumed})" if resumed is not None else "")
+        + (f" (resumed after episode {resumed}{'' if exact else ', on a fresh env'})" if resumed is not None else "")
         + f", last reward phase {reward_phase!r}; test ({spec.eval_episodes} Rayleigh episodes, {reward_phase!r} "
         f"reward): success {100 * summary['success_rate']:.0f} %, MQI {format_ci(summary['mqi'], summary['mqi_ci'])}; "
         f"model: {run_dir / 'model.zip'}, result: {run_dir / 'result.json'}, TensorBoard: {Path(args.tb) / spec.run_id}"

@@ -100,7 +100,11 @@ def _checkpoint_of_an_earlier_version(tmp_path, monkeypatch):
         _interrupt_at(patch, 2)
         with pytest.raises(KeyboardInterrupt):
             run_one(DDPG, tmp_path, resume=True, checkpoint_every=2)
-    run_dir = tmp_path / "runs" / DDPG.run_id
+    return _as_an_earlier_version(tmp_path / "runs" / DDPG.run_id)
+
+
+def _as_an_earlier_version(run_dir):
+    """Make the run's checkpoint one the versions before the training state wrote. :return: ``run_dir``"""
     pointer = json.loads((run_dir / "checkpoint.json").read_text())
     (run_dir / pointer["folder"] / TRAINING_STATE).unlink()
     del pointer["same_as_uninterrupted"]
@@ -118,6 +122,19 @@ def test_train_resumes_a_checkpoint_without_its_training_state_on_a_fresh_env_an
     assert json.loads((run_dir / "checkpoint.json").read_text())["same_as_uninterrupted"] is False
     result = run_one(DDPG, tmp_path, resume=True, checkpoint_every=2)
     assert result["train"]["resumed_at_episode"] == 4 and result["train"]["same_as_uninterrupted"] is False
+
+
+def test_train_says_when_a_run_resumed_on_a_fresh_env(tmp_path, monkeypatch, capsys):
+    from sb3_dtdpg.cli import main
+
+    argv = ["train", "--algo", "ddpg", "--preset", "paper", "--observation", "paper", "--scenario", "small"]
+    argv += ["--episodes", "6", "--checkpoint-every", "2", "--eval-episodes", "1", "--no-progress", "--out", str(tmp_path)]
+    with monkeypatch.context() as patch:
+        _interrupt_at(patch, 2)
+        assert main(argv) == 130
+    _as_an_earlier_version(tmp_path / "runs" / DDPG.run_id)
+    assert main(argv) == 0
+    assert "6 episodes (resumed after episode 2, on a fresh env), last reward phase" in capsys.readouterr().out
 
 
 def test_a_compare_run_trains_afresh_over_a_checkpoint_without_its_training_state(tmp_path, monkeypatch):
