@@ -202,3 +202,16 @@ def test_a_checkpoint_of_a_model_on_another_vector_env_keeps_no_training_state_a
     folder = save_checkpoint(model, tmp_path, {}, 1)
     assert (folder / "model.zip").is_file() and not (folder / TRAINING_STATE).exists()
     assert read_checkpoint(tmp_path)["same_as_uninterrupted"] is False
+
+
+def test_the_jobs_closing_lines_count_the_resumed_runs():
+    from sb3_dtdpg.experiments.pool import RunReport
+    from sb3_dtdpg.experiments.reproduce import _counts
+
+    report = RunReport(finished=["a", "b"], resumed=["a", "b"], skipped=["c"])
+    assert report.counts() == "2 runs (2 resumed from their checkpoints), 1 already done"  # compare's
+    results = {"a": {}, "b": {}, "c": {}, "d": None}
+    assert _counts({"a", "b", "c"}, results, report) == (
+        "3 of 3 runs finished (of all experiments' 4 runs, 3); 2 resumed from their checkpoints"
+    )
+    assert RunReport(finished=["a"]).counts() == "1 run, 0 already done"

@@ -122,11 +122,15 @@ class RunReport:
         :return: e.g. ``"4 runs (1 resumed from its checkpoint), 2 already done, 1 failed"`` (the resumed and the
             failed only when there are some)
         """
-        n_resumed = len(self.resumed)
-        resumed = f" ({n_resumed} resumed from {'its checkpoint' if n_resumed == 1 else 'their checkpoints'})"
+        resumed = f" ({self.resumed_count()})" if self.resumed else ""
         failed = f", {len(self.failed)} failed" if self.failed else ""
         runs = f"{len(self.finished)} run{'' if len(self.finished) == 1 else 's'}"
-        return f"{runs}{resumed if n_resumed else ''}, {len(self.skipped)} already done{failed}"
+        return f"{runs}{resumed}, {len(self.skipped)} already done{failed}"
+
+    def resumed_count(self) -> str:
+        """:return: e.g. ``"2 resumed from their checkpoints"`` (empty when no run resumed)"""
+        n_resumed = len(self.resumed)
+        return f"{n_resumed} resumed from {'its checkpoint' if n_resumed == 1 else 'their checkpoints'}" if n_resumed else ""
 
     def incomplete_note(self, run_ids: Iterable[str] | None = None) -> str | None:
         """

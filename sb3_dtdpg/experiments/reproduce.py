@@ -530,11 +530,16 @@ def run_reproduce(
 
 
 def _counts(wanted: set[str], results: dict[str, Any], report: RunReport) -> str:
-    """:return: e.g. ``"20 of 20 runs finished (of all experiments' 130 runs, 20), 1 failed"``"""
+    """
+    :return: e.g. ``"20 of 20 runs finished (of all experiments' 130 runs, 20); 2 resumed from their checkpoints,
+        1 failed"``
+    """
     finished = sum(results[run_id] is not None for run_id in wanted)
     counts = f"{finished} of {len(wanted)} runs finished"
     if len(wanted) < len(results):
         counts += f" (of all experiments' {len(results)} runs, {sum(result is not None for result in results.values())})"
+    if report.resumed:
+        counts += f"; {report.resumed_count()}"
     if report.failed:
         counts += f", {len(report.failed)} failed"
     return counts
