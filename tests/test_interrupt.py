@@ -31,7 +31,7 @@ JOB = textwrap.dedent(
         Path(f"{marker}.tmp").write_text(str(os.getpid()))
         os.replace(f"{marker}.tmp", marker)
         time.sleep(120)
-        return job.run_id, 120.0
+        return job.run_id, 120.0, False
 
     if __name__ == "__main__":
         out = sys.argv[1]

@@ -180,7 +180,7 @@ class RunsFailedError(RuntimeError):
 
 
 def run_in_pool(
-    work: Callable[..., tuple[str, float]],
+    work: Callable[..., tuple[str, float, bool]],
     jobs: Sequence[tuple[RunSpec, Any]],
     out: str | Path,
     n_workers: int,
@@ -198,7 +198,8 @@ def run_in_pool(
     any more. Ctrl-C raises ``KeyboardInterrupt``; SIGTERM (when it has its default action) then ends the process
     as it would have.
 
-    :param work: a module-level function (it is sent to spawned processes) returning the run id and its seconds
+    :param work: a module-level function (it is sent to spawned processes) returning the run id, its seconds and
+        whether the run went on from a checkpoint
     :param jobs: the arguments of each call, the run's spec first
     :param out: output folder (where the running runs' progress is read)
     :param n_workers: number of processes
@@ -218,8 +219,10 @@ def run_in_pool(
                     for future in done:
                         spec = pending.pop(future)
                         try:
-                            _, seconds = future.result()
+                            _, seconds, resumed = future.result()
                             report.finished.append(spec.run_id)
+                            if resumed:
+                                report.resumed.append(spec.run_id)
                             bars.finished(spec.run_id, f"{spec.run_id} done in {seconds:.0f} s")
                             if on_finish is not None:
                                 on_finish(spec.run_id)

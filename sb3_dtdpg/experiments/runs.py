@@ -607,10 +607,11 @@ def _record_result(spec: RunSpec, out: Path, model: Any, trained: dict[str, Any]
     return result
 
 
-def _worker(spec: RunSpec, out: str, identity: dict[str, Any]) -> tuple[str, float]:
+def _worker(spec: RunSpec, out: str, identity: dict[str, Any]) -> tuple[str, float, bool]:
+    """:return: the run id, its seconds and whether it went on from a checkpoint (:func:`run_in_pool`'s ``work``)"""
     start = time.perf_counter()
-    run_one(spec, out, identity=identity, retest=True, checkpoint_every=CHECKPOINT_EVERY)
-    return spec.run_id, time.perf_counter() - start
+    result = run_one(spec, out, identity=identity, retest=True, checkpoint_every=CHECKPOINT_EVERY)
+    return spec.run_id, time.perf_counter() - start, result["train"]["resumed_at_episode"] is not None
 
 
 def run_many(
@@ -659,14 +660,4 @@ def run_many(
     start = time.perf_counter()
     run_in_pool(_worker, todo, out, n_workers, report, progress=progress, on_finish=on_finish)
     report.wall_s = time.perf_counter() - start
-    finished = set(report.finished)
-    report.resumed = [spec.run_id for spec in specs if spec.run_id in finished and _resumed(out, spec)]
     return report
-
-
-def _resumed(out: str | Path, spec: RunSpec) -> bool:
-    """:return: whether the run's stored result went on from a checkpoint"""
-    try:
-        return json.loads(result_path(out, spec).read_text())["train"]["resumed_at_episode"] is not None
-    except (OSError, ValueError, KeyError, TypeError):
-        return False
