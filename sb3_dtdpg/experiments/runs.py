@@ -490,9 +490,7 @@ def _train_and_record(
     start_timesteps = int(model.num_timesteps) if checkpoint is not None else 0  # learn() resets a new model's count
     model.set_logger(run_logger(tb_dir, verbose, start_timesteps if checkpoint is not None else None))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
-    exact = checkpoint is None or (
-        checkpoint.get("same_as_uninterrupted") is True and (checkpoint["path"] / training_state.TRAINING_STATE).is_file()
-    )
+    exact = checkpoint is None or _resumes_exactly(checkpoint)
     counter, callbacks, total_timesteps = _callbacks(
         spec, out, model, max_steps, done_episodes, identity, checkpoint_every, exact
     )
@@ -565,11 +563,13 @@ def _uninterrupted_checkpoint(run_dir: Path, identity: dict[str, Any]) -> dict[s
         checkpoint = read_checkpoint(run_dir, identity)
     except (RunMismatchError, DamagedRecordError):
         return None
-    if checkpoint is None or checkpoint.get("same_as_uninterrupted") is not True:
-        return None
-    if not (checkpoint["path"] / training_state.TRAINING_STATE).is_file():
-        return None
-    return checkpoint
+    return checkpoint if checkpoint is not None and _resumes_exactly(checkpoint) else None
+
+
+def _resumes_exactly(checkpoint: dict[str, Any]) -> bool:
+    """:return: whether resuming from the checkpoint (:func:`read_checkpoint`) gives the uninterrupted run's training:
+    it was recorded so and keeps its training state"""
+    return checkpoint.get("same_as_uninterrupted") is True and (checkpoint["path"] / training_state.TRAINING_STATE).is_file()
 
 
 def _load_trained(spec: RunSpec, run_dir: Path, verbose: int) -> Any:
