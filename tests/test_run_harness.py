@@ -364,11 +364,38 @@ def test_checkpoints_interrupted_while_written_or_removed_are_no_error(tmp_path,
     assert run_one(SPEC, tmp_path / "b", resume=True, checkpoint_every=1)["train"]["resumed_at_episode"] is None
 
 
-def test_steps_per_s_of_a_resumed_run_counts_the_steps_it_trained(tmp_path, monkeypatch):
+def test_a_resumed_runs_training_time_counts_its_part_before_the_checkpoint_and_its_rate_the_steps_it_trained(
+    tmp_path, monkeypatch
+):
     _, checkpoint = _interrupt_after_first_checkpoint(SPEC, tmp_path, monkeypatch)
+    assert checkpoint["train_s"] > 0
+    pointer = tmp_path / "runs" / SPEC.run_id / "checkpoint.json"
+    pointer.write_text(json.dumps({**checkpoint, "train_s": 1000.0}))  # as if the part before took 1000 s
     train = run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)["train"]
     assert train["resumed_at_episode"] == 1 and train["timesteps"] > checkpoint["timesteps"] > 0
+    # before: the resumed part's time only
+    assert 1000.0 < train["wall_s"] < 1100.0 and train["wall_s_complete"] is True
+    resumed_s = train["wall_s"] - 1000.0
     # before: all the run's steps over the resumed part's wall time
+    assert train["steps_per_s"] == pytest.approx((train["timesteps"] - checkpoint["timesteps"]) / resumed_s)
+
+
+def test_a_checkpoint_counts_the_training_time_of_every_part_before_it(tmp_path, monkeypatch):
+    _, first = _interrupt_after_first_checkpoint(SPEC, tmp_path, monkeypatch)
+    pointer = tmp_path / "runs" / SPEC.run_id / "checkpoint.json"
+    pointer.write_text(json.dumps({**first, "train_s": 1000.0}))
+    _, second = _interrupt_after_first_checkpoint(SPEC, tmp_path, monkeypatch)  # resumed, then stopped again
+    assert second["episodes"] == first["episodes"] + 1 and 1000.0 < second["train_s"] < 1100.0
+
+
+@pytest.mark.parametrize("recorded", [None, "absent", -1.0, "12 s", True])
+def test_a_checkpoint_without_a_training_time_resumes_and_says_its_time_is_the_resumed_parts(tmp_path, monkeypatch, recorded):
+    _, checkpoint = _interrupt_after_first_checkpoint(SPEC, tmp_path, monkeypatch)
+    pointer = tmp_path / "runs" / SPEC.run_id / "checkpoint.json"
+    record = {k: v for k, v in checkpoint.items() if k != "train_s"}  # as an earlier version wrote it
+    pointer.write_text(json.dumps(record if recorded == "absent" else {**record, "train_s": recorded}))
+    train = run_one(SPEC, tmp_path, resume=True, checkpoint_every=1)["train"]
+    assert train["resumed_at_episode"] == 1 and train["wall_s_complete"] is False
     assert train["steps_per_s"] == pytest.approx((train["timesteps"] - checkpoint["timesteps"]) / train["wall_s"])
 
 

@@ -113,14 +113,27 @@ class PeriodicCheckpoint(BaseCallback):
     :param identity: the run's :func:`sb3_dtdpg.experiments.specs.run_identity`, stored with each checkpoint
     :param counter: the run's episode count
     :param exact: whether the training so far is the uninterrupted run's (recorded with each checkpoint)
+    :param trained_s: wall-clock seconds the run trained before this ``learn`` call (its checkpoint's; None: not
+        known), to which each checkpoint adds this call's, so that a resumed run's training time is its whole
     """
 
     def __init__(
-        self, run_dir: Path, every: int, identity: dict[str, Any], counter: EpisodeCounter, exact: bool = True
+        self,
+        run_dir: Path,
+        every: int,
+        identity: dict[str, Any],
+        counter: EpisodeCounter,
+        exact: bool = True,
+        trained_s: float | None = 0.0,
     ) -> None:
         super().__init__()
         self.run_dir, self.every, self.identity, self.counter, self.exact = run_dir, every, identity, counter, exact
+        self.trained_s = trained_s
         self._due = False
+        self._start = time.perf_counter()
+
+    def _on_training_start(self) -> None:
+        self._start = time.perf_counter()
 
     def _on_step(self) -> bool:
         if self.counter.ended:
@@ -133,7 +146,8 @@ class PeriodicCheckpoint(BaseCallback):
         if self._due:
             self._due = False
             check_finite(self.model)  # a diverged model is no checkpoint to resume from
-            save_checkpoint(self.model, self.run_dir, self.identity, self.counter.n_episodes, self.exact)
+            train_s = None if self.trained_s is None else self.trained_s + time.perf_counter() - self._start
+            save_checkpoint(self.model, self.run_dir, self.identity, self.counter.n_episodes, self.exact, train_s)
 
 
 def non_finite(tensors: Iterable[tuple[str, Any]]) -> list[str]:

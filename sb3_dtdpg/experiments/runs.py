@@ -254,9 +254,11 @@ def _callbacks(
     identity: dict[str, Any],
     checkpoint_every: int | None,
     exact: bool,
+    trained_s: float | None,
 ) -> tuple[EpisodeCounter, list[BaseCallback], int]:
     """
     :param exact: whether the training so far is the uninterrupted run's (recorded with the checkpoints)
+    :param trained_s: wall-clock seconds trained before the checkpoint resumed from (None: not known)
     :return: the run's episode counter, its callbacks (the counter first) and the timesteps left to train
     """
     from sb3_dtdpg.baselines import mission_callbacks
@@ -272,7 +274,7 @@ def _callbacks(
         progress = RunProgress(progress_path(out, spec), spec.timesteps, counter, "timesteps")
     callbacks: list[BaseCallback] = [counter, *mission_callbacks(model), progress]
     if checkpoint_every:
-        callbacks.append(PeriodicCheckpoint(run_folder(out, spec), checkpoint_every, identity, counter, exact))
+        callbacks.append(PeriodicCheckpoint(run_folder(out, spec), checkpoint_every, identity, counter, exact, trained_s))
     return counter, callbacks, total_timesteps
 
 
@@ -491,8 +493,9 @@ def _train_and_record(
     model.set_logger(run_logger(tb_dir, verbose, start_timesteps if checkpoint is not None else None))
     max_steps = int(env.unwrapped.scenario.mission.max_steps)
     exact = checkpoint is None or _resumes_exactly(checkpoint)
+    trained_s = 0.0 if checkpoint is None else checkpoint["train_s"]
     counter, callbacks, total_timesteps = _callbacks(
-        spec, out, model, max_steps, done_episodes, identity, checkpoint_every, exact
+        spec, out, model, max_steps, done_episodes, identity, checkpoint_every, exact, trained_s
     )
     try:
         train_s = _train(model, callbacks, total_timesteps, checkpoint is not None, progress_bar)
@@ -513,8 +516,11 @@ def _train_and_record(
             "episodes": int(counter.n_episodes),
             "resumed_at_episode": done_episodes if checkpoint is not None else None,
             "same_as_uninterrupted": exact,  # started afresh, or resumed from checkpoints that kept everything
-            "wall_s": train_s,  # of this process's training (a resumed run: of its resumed part)
-            # the steps trained in this process over wall_s (a resumed run: not the steps before its checkpoint)
+            # the training's: up to the checkpoint it resumed from, then in this process (a checkpoint of an
+            # earlier version records no time: then this process's only, as wall_s_complete says)
+            "wall_s": train_s + (trained_s or 0.0),
+            "wall_s_complete": trained_s is not None,
+            # the steps trained in this process over its training time (a resumed run: not those before its checkpoint)
             "steps_per_s": (model.num_timesteps - start_timesteps) / max(train_s, 1e-9),
         },
         "reward_phases": {"trained": trained_on, "evaluated": final_reward_phase},

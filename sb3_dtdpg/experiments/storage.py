@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import shutil
 from collections.abc import Iterable, Iterator
@@ -411,7 +412,14 @@ def _csv_rows_until(path: Path, step: int) -> tuple[list[str], list[str]] | None
     return header, rows
 
 
-def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episodes: int, exact: bool = True) -> Path:
+def save_checkpoint(
+    model: Any,
+    run_dir: Path,
+    identity: dict[str, Any],
+    episodes: int,
+    exact: bool = True,
+    train_s: float | None = None,
+) -> Path:
     """
     Write a checkpoint: model, replay buffer and training state (:mod:`.training_state`) into a fresh
     ``checkpoints/<episodes>`` folder, then ``checkpoint.json`` (atomically) pointing at it, then remove the older
@@ -424,6 +432,8 @@ def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episode
     :param exact: whether the training so far is the uninterrupted run's (it started afresh, or resumed from
         an exact checkpoint), so that resuming from this one gives the uninterrupted run's training bit for bit
         (recorded so where the training state is kept: the model trains on a ``DummyVecEnv``)
+    :param train_s: the wall-clock seconds of the training up to this checkpoint, over all its resumed parts (None:
+        not known, the run resumed from a checkpoint that does not record them)
     :return: the checkpoint folder
     """
     folder = run_dir / "checkpoints" / f"episode_{episodes}"
@@ -440,6 +450,7 @@ def save_checkpoint(model: Any, run_dir: Path, identity: dict[str, Any], episode
         "timesteps": int(model.num_timesteps),
         "folder": str(folder.relative_to(run_dir)),
         "same_as_uninterrupted": exact and kept,
+        "train_s": train_s,
         "made_with": made_with(),
     }
     write_json(run_dir / "checkpoint.json", pointer, indent=1)
@@ -460,7 +471,8 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
 
     :param run_dir: the run's folder
     :param identity: the run's :func:`run_identity` (None: not checked)
-    :return: ``checkpoint.json``'s content plus ``path`` (the folder), or None when there is no ``checkpoint.json``
+    :return: ``checkpoint.json``'s content plus ``path`` (the folder), ``train_s`` None where it records no duration,
+        or None when there is no ``checkpoint.json``
     :raises RunMismatchError: the checkpoint is another run's
     :raises DamagedRecordError: the checkpoint record is damaged, or the checkpoint it names has no ``model.zip``
     """
@@ -485,6 +497,9 @@ def read_checkpoint(run_dir: str | Path, identity: dict[str, Any] | None = None)
             f"{str(counts)[:80]}); delete {pointer} to start the run afresh"
         )
     checkpoint["path"] = run_dir / folder
+    train_s = checkpoint.get("train_s")
+    if not (isinstance(train_s, int | float) and not isinstance(train_s, bool) and 0 <= train_s < math.inf):
+        checkpoint["train_s"] = None  # not recorded (a checkpoint of an earlier version), or not a duration
     if not (checkpoint["path"] / "model.zip").is_file():
         raise DamagedRecordError(
             f"{pointer} names the checkpoint {checkpoint['path']}, which has no model.zip (removed from outside?); "
