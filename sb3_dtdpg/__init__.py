@@ -20,6 +20,8 @@ _EXPORTS = {
     "MlpPolicy": "sb3_dtdpg.dtdpg",
     "MultiInputPolicy": "sb3_dtdpg.dtdpg",
     "CurriculumTransferCallback": "sb3_dtdpg.common.callbacks",
+    "ExactCheckpointCallback": "sb3_dtdpg.common.checkpoints",
+    "load_checkpoint": "sb3_dtdpg.common.checkpoints",
     "LinearDecayOUNoise": "sb3_dtdpg.common.noise",
     "Phase": "sb3_dtdpg.common.phases",
     "MissionLoggerCallback": "sb3_dtdpg.missions",
@@ -30,12 +32,14 @@ __all__ = [
     "DTDPG",
     "CnnPolicy",
     "CurriculumTransferCallback",
+    "ExactCheckpointCallback",
     "LinearDecayOUNoise",
     "MissionLoggerCallback",
     "MlpPolicy",
     "MultiInputPolicy",
     "Phase",
     "__version__",
+    "load_checkpoint",
     "preset",
 ]
 

@@ -8,9 +8,9 @@ import pytest
 import torch as th
 from stable_baselines3.common.save_util import load_from_zip_file
 
+from sb3_dtdpg.common.training_state import TRAINING_STATE
 from sb3_dtdpg.experiments import runs
 from sb3_dtdpg.experiments.runs import PeriodicCheckpoint, RunSpec, prepare_run, result_path, run_one
-from sb3_dtdpg.experiments.training_state import TRAINING_STATE
 
 # 6 episodes of 60 steps at most; the paper's settings learn from step 100, DT-DPG's transfer comes after episode 4
 DDPG = RunSpec("ddpg", "noma", 0, 6, scenario="small", eval_episodes=2, observation="paper")

@@ -102,7 +102,7 @@ class RunProgress(BaseCallback):
 
 class PeriodicCheckpoint(BaseCallback):
     """
-    Save the model, its replay buffer and the training state (:mod:`sb3_dtdpg.experiments.training_state`) every
+    Save the model, its replay buffer and the training state (:mod:`sb3_dtdpg.common.training_state`) every
     ``every`` episodes, for :func:`sb3_dtdpg.experiments.runs.run_one` to resume from. The checkpoint is taken at
     the start of the rollout after the one in which the episode ended: the buffer holds the episode's last
     transition and the gradient steps that followed it are done, so that the resumed ``learn`` starts where the

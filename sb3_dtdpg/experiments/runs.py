@@ -34,8 +34,8 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_dtdpg import env_settings
+from sb3_dtdpg.common import training_state
 from sb3_dtdpg.common.files import atomic_write, json_default, remove_temp_files, write_json
-from sb3_dtdpg.experiments import training_state
 from sb3_dtdpg.experiments.budgets import BUDGETS, CHECKPOINT_EVERY, PUBLIC_BUDGETS, Budget, check_budget, get_budget
 from sb3_dtdpg.experiments.pool import RunReport, RunsFailedError, run_in_pool, worker_pool
 from sb3_dtdpg.experiments.provenance import made_with, warn_other_versions

@@ -23,10 +23,10 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_dtdpg.common.checks import shortened
 from sb3_dtdpg.common.files import atomic_write, write_json
+from sb3_dtdpg.common.training_state import TRAINING_STATE
+from sb3_dtdpg.common.training_state import save as save_training_state
 from sb3_dtdpg.experiments.provenance import made_with, warn_other_versions
 from sb3_dtdpg.experiments.specs import RunMismatchError, RunSpec, check_identity, run_identity
-from sb3_dtdpg.experiments.training_state import TRAINING_STATE
-from sb3_dtdpg.experiments.training_state import save as save_training_state
 
 __all__ = [
     "FOLDER_LOCK",
