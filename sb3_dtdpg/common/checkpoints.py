@@ -163,8 +163,6 @@ def load_checkpoint(path: str | Path, env: GymEnv, algorithm: type[BaseAlgorithm
     model_file, replay_buffer_file, state_file = checkpoint_files(path)
     state = training_state.load(state_file)
     model = algorithm.load(model_file, env=None, **kwargs)  # with the env, loading would seed it
-    model.set_env(env, force_reset=False)  # SB3's wrapping, as the trained model's env; the episode goes on
-    training_state.restore_env(model.get_env(), state["env"])
+    training_state.restore(model, env, state)
     model.load_replay_buffer(replay_buffer_file)  # type: ignore[attr-defined]
-    training_state.restore_generators(model, state["generators"])
     return model

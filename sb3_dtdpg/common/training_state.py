@@ -25,7 +25,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-__all__ = ["TRAINING_STATE", "capture", "env_state", "load", "restore_env", "restore_generators", "save"]
+__all__ = ["TRAINING_STATE", "capture", "env_state", "load", "restore", "restore_env", "restore_generators", "save"]
 
 #: The file of a checkpoint folder that holds the training state (next to ``model.zip`` and ``replay_buffer.pkl``).
 TRAINING_STATE = "training_state.pkl"
@@ -133,3 +133,19 @@ def restore_generators(model: Any, generators: dict[str, Any]) -> None:
     random.setstate(generators["python"])
     th.set_rng_state(generators["torch"])
     model.action_space.np_random.bit_generator.state = generators["action_space"]
+
+
+def restore(model: Any, env: Any, state: dict[str, Any]) -> None:
+    """
+    Give a model loaded without an env (loading with one would seed it) its training env as :func:`capture` found it,
+    and the random generators: the env is wrapped as SB3 wraps a training env and takes the saved env's place
+    (:func:`restore_env`), the episode in progress goes on. Then ``learn(..., reset_num_timesteps=False)`` trains on
+    as the uninterrupted training would.
+
+    :param model: the loaded model
+    :param env: an env built as the training env was
+    :param state: the training state (:func:`load`)
+    """
+    model.set_env(env, force_reset=False)
+    restore_env(model.get_env(), state["env"])
+    restore_generators(model, state["generators"])

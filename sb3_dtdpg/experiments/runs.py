@@ -207,21 +207,18 @@ def _resume_model(
 ) -> tuple[Any, Any, int]:
     """:func:`_build_model` from a checkpoint"""
     from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-    from stable_baselines3.common.vec_env import DummyVecEnv
 
     from sb3_dtdpg.baselines import load_model, make_env
 
     pointer, folder = run_dir / "checkpoint.json", checkpoint["path"]
     buffer, state_file = folder / "replay_buffer.pkl", folder / training_state.TRAINING_STATE
-    env, state = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs), None
+    env = make_env(spec.algo, spec.env_id, spec.multiple_access, spec.channel, spec.env_kwargs)
     try:
         try:
             if state_file.exists():  # the env as it was (the model loads without one: loading would seed it)
                 state = training_state.load(state_file)
                 model = load_model(spec.algo, folder / "model.zip", device="cpu", verbose=verbose, **phase_files)
-                vec_env = DummyVecEnv([lambda: env])  # as SB3 wraps the run's env (Monitor-wrapped already)
-                training_state.restore_env(vec_env, state["env"])
-                model.set_env(vec_env, force_reset=False)
+                training_state.restore(model, env, state)
             else:  # a checkpoint of an earlier version: a fresh env
                 model = load_model(spec.algo, folder / "model.zip", env=env, device="cpu", verbose=verbose, **phase_files)
             if buffer.exists():
@@ -240,8 +237,6 @@ def _resume_model(
     except DamagedRecordError:
         env.close()
         raise
-    if state is not None:
-        training_state.restore_generators(model, state["generators"])
     return env, model, int(checkpoint["episodes"])
 
 
