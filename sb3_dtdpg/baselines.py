@@ -23,8 +23,10 @@ The settings sets (``hyperparams``, ``--hyperparams`` of the CLI) are :mod:`sb3_
 
 from __future__ import annotations
 
+import contextlib
 import inspect
-from collections.abc import Mapping
+import warnings
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -104,11 +106,16 @@ def load_model(algo: str, path: Any, **kwargs: Any) -> BaseAlgorithm:
     :param kwargs: ``load``'s keyword arguments (``env``, ``device``, ``custom_objects``, settings)
     :return: the model
     """
-    import warnings
+    with without_n_step_load_warning():
+        return algorithm_class(algo).load(path, **kwargs)
 
+
+@contextlib.contextmanager
+def without_n_step_load_warning() -> Iterator[None]:
+    """Silence SB3 2.9.2's warning on loading its own n-step models (see :func:`load_model`) inside the block."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
-        return algorithm_class(algo).load(path, **kwargs)
+        yield
 
 
 def check_hyperparams(algo: str, hyperparams: str) -> None:

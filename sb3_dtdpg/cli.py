@@ -323,67 +323,122 @@ def _train_mission(args: argparse.Namespace, multiple_access: str, channel: str)
 
 
 def _train_any_env(args: argparse.Namespace, env: Any) -> int:
-    """``train`` on any other registered env id: SB3's ``learn``, then ``evaluate_policy``."""
-    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
-    from stable_baselines3.common.evaluation import evaluate_policy
-
-    from sb3_dtdpg.baselines import make_model, mission_callbacks
-    from sb3_dtdpg.common.files import atomic_write, safe_name, unused_path
-    from sb3_dtdpg.experiments.runs import EpisodeReturnLogger
+    """
+    ``train`` on any other registered env id: SB3's ``learn`` with a checkpoint every ``--checkpoint-every``
+    episodes' steps, from which the same command resumes (:mod:`sb3_dtdpg.experiments.env_runs`), then
+    ``evaluate_policy``.
+    """
+    from sb3_dtdpg.common.files import safe_name
+    from sb3_dtdpg.experiments.runs import output_lock
+    from sb3_dtdpg.experiments.storage import run_lock_name
 
     run_name = f"{args.algo}_{safe_name(args.env)}_s{args.seed}" + (f"_{args.tag}" if args.tag else "")
     out = Path(args.out)
-    if (out / f"{run_name}.zip").exists():  # runs on other envs are not resumed: a new one would replace it
+    if (out / f"{run_name}.zip").exists():  # a trained run: a new one would replace it
         args.error(
             f"--out {out} holds {run_name}.zip, the model of an earlier train of {args.algo} on {args.env} with seed "
             f"{args.seed}; move it, or use another --out, --seed or --tag"
         )
-    model = make_model(
-        args.algo,
-        env,
-        seed=args.seed,
-        tensorboard_log=args.tb,
-        learning_rate=args.learning_rate,
-        verbose=args.verbose,
-        hyperparams=args.hyperparams,
-        **args.overrides,
-    )
-    callbacks = [EpisodeReturnLogger(), *mission_callbacks(model)]
-    if args.timesteps is not None:
-        total = args.timesteps
-    else:
-        total = args.episodes * env.spec.max_episode_steps
-        callbacks.append(StopTrainingOnMaxEpisodes(args.episodes))
     try:
-        model.learn(
-            total_timesteps=total, callback=callbacks, log_interval=1, tb_log_name=run_name, progress_bar=not args.no_progress
+        with _busy_folder_errors(args), output_lock(out, run_lock_name(run_name)):
+            return _train_any_env_run(args, env, run_name)
+    finally:
+        env.close()
+
+
+def _any_env_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """What a run of ``train`` on another env trains with, by option: a resume must give the same."""
+    from sb3_dtdpg.overrides import override_text
+
+    return {
+        "--algo": args.algo,
+        "--env": args.env,
+        "--seed": args.seed,
+        "--preset": args.hyperparams,
+        "--hyperparams": " ".join(f"{name}:{override_text(value)}" for name, value in args.overrides.items()) or None,
+        "--learning-rate": args.learning_rate,
+        "--timesteps": args.timesteps,
+        "--episodes": None if args.timesteps is not None else args.episodes,
+    }
+
+
+def _train_any_env_run(args: argparse.Namespace, env: Any, run_name: str) -> int:
+    """:func:`_train_any_env` under the run's lock."""
+    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+    from stable_baselines3.common.evaluation import evaluate_policy
+
+    from sb3_dtdpg.baselines import algorithm_class, make_model, mission_callbacks
+    from sb3_dtdpg.common.checkpoints import checkpoint_steps
+    from sb3_dtdpg.common.files import atomic_write, unused_path
+    from sb3_dtdpg.experiments import env_runs
+    from sb3_dtdpg.experiments.runs import EpisodeReturnLogger
+
+    out = Path(args.out)
+    max_steps = env.spec.max_episode_steps  # None: episodes never end on a limit, no checkpoint
+    folder = env_runs.checkpoint_folder(out, run_name)
+    model = None if max_steps is None else env_runs.resume(folder, _any_env_settings(args), env, algorithm_class(args.algo))
+    resumed_at = None if model is None else model.num_timesteps
+    if model is None:
+        model = make_model(
+            args.algo,
+            env,
+            seed=args.seed,
+            tensorboard_log=args.tb,
+            learning_rate=args.learning_rate,
+            verbose=args.verbose,
+            hyperparams=args.hyperparams,
+            **args.overrides,
         )
-    except KeyboardInterrupt:  # as the RL Zoo does: keep the model so far (no checkpoints to resume from here)
+    else:
+        model.tensorboard_log, model.verbose = args.tb, args.verbose
+        print(f"{run_name}: resuming after {resumed_at} steps ({model._episode_num} episodes) from {folder}")
+    callbacks = [EpisodeReturnLogger(), *mission_callbacks(model)]
+    if max_steps is not None:
+        callbacks.append(env_runs.checkpoint_callback(folder, run_name, args.checkpoint_every * max_steps))
+    if args.timesteps is not None:
+        total, to_go = args.timesteps, args.timesteps - model.num_timesteps
+    else:
+        total, to_go = args.episodes * max_steps, args.episodes - model._episode_num
+        callbacks.append(StopTrainingOnMaxEpisodes(to_go))
+    try:
+        if to_go > 0:  # 0: the checkpoint was saved as the training ended, before its model
+            model.learn(
+                total_timesteps=total - model.num_timesteps,
+                callback=callbacks,
+                log_interval=1,
+                tb_log_name=run_name,
+                reset_num_timesteps=resumed_at is None,
+                progress_bar=not args.no_progress,
+            )
+    except KeyboardInterrupt:  # as the RL Zoo does, the model so far is kept too
         out.mkdir(parents=True, exist_ok=True)
         # A free name: the model of an earlier interruption of the same command stays
         saved = atomic_write(unused_path(out, f"{run_name}_interrupted", ".zip"), model.save)
-        print(
-            f"interrupted after {model.num_timesteps} steps: the model so far is in {saved}; "
-            f"runs on {args.env} are not checkpointed, the same command starts afresh",
-            file=sys.stderr,
-        )
-        env.close()
+        latest = None if max_steps is None else env_runs.latest_checkpoint(folder)
+        if latest is not None:
+            then = f"the same command resumes from the checkpoint after {checkpoint_steps(latest)} steps, {latest}"
+        elif max_steps is None:
+            then = f"{args.env} has no episode step limit, so no checkpoints: the same command starts afresh"
+        else:
+            then = f"no checkpoint yet (one every {args.checkpoint_every} episodes): the same command starts afresh"
+        print(f"interrupted after {model.num_timesteps} steps: the model so far is in {saved}; {then}", file=sys.stderr)
         return 130
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / f"{run_name}.zip", model.save)
+    env_runs.remove_checkpoints(folder)
     eval_env = model.get_env()
     eval_env.seed(args.eval_seed)  # the test episodes' resets, as --eval-seed says (was the training env's next ones)
     try:
         mean, std = evaluate_policy(model, eval_env, n_eval_episodes=args.eval_episodes, deterministic=True)
     except KeyboardInterrupt:
         print(f"interrupted in the test episodes: the trained model is in {out / (run_name + '.zip')}", file=sys.stderr)
-        env.close()
         return 130
     print(
-        f"{run_name}: {model.num_timesteps} steps; test ({args.eval_episodes} episodes): reward {mean:.1f} ± {std:.1f}; "
-        f"model saved to {out / (run_name + '.zip')}"
+        f"{run_name}: {model.num_timesteps} steps"
+        + (f" (resumed after step {resumed_at})" if resumed_at is not None else "")
+        + f"; test ({args.eval_episodes} episodes): reward {mean:.1f} ± {std:.1f}; model saved to "
+        f"{out / (run_name + '.zip')}"
     )
-    env.close()
     return 0
 
 

@@ -343,14 +343,16 @@ def build_parser() -> argparse.ArgumentParser:
         type=output_folder,
         default="results/train",
         help="output folder: on the NomaRadioMap envs <out>/runs/<run id>/ gets the model, checkpoints and result; "
-        "on other envs the model is <algo>_<env id>_s<seed>.zip (default: results/train)",
+        "on other envs the model is <algo>_<env id>_s<seed>.zip, its checkpoints in <algo>_<env id>_s<seed>_checkpoints/ "
+        "while it trains (default: results/train)",
     )
     p.add_argument(
         "--checkpoint-every",
         type=positive_int,
         default=10,
-        help="NomaRadioMap envs: save a checkpoint (model, replay buffer, env and random state) every N episodes; "
-        "the same command resumes from the last one, as the uninterrupted run would go on (default: 10)",
+        help="save a checkpoint (model, replay buffer, env and random state) every N episodes (other envs: at the end "
+        "of the first episode after every N x their step limit steps; none without a limit); the same command resumes "
+        "from the last one, as the uninterrupted run would go on (default: 10)",
     )
     p.add_argument("--eval-episodes", type=positive_int, default=20, help="test episodes after training (default: 20)")
     p.add_argument("--eval-seed", type=_seed, default=10_000, help="seed of the first test episode (default: 10000)")

@@ -6,10 +6,9 @@ import dataclasses
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch as th
+from bitwise import same, saved_weights
 from stable_baselines3 import DDPG, PPO
 from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
-from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 from sb3_dtdpg import DTDPG, ExactCheckpointCallback, load_checkpoint, preset
@@ -44,15 +43,7 @@ def _short_pendulum():
 
 def _weights(model, folder):
     model.save(folder / "final.zip")
-    return load_from_zip_file(folder / "final.zip", device="cpu")[1]  # weights, targets, Adam's moments and steps
-
-
-def _same(a, b) -> bool:
-    if isinstance(a, dict):
-        return a.keys() == b.keys() and all(_same(a[key], b[key]) for key in a)
-    if isinstance(a, th.Tensor):
-        return a.dtype == b.dtype and a.shape == b.shape and bool((a == b).all())
-    return a == b
+    return saved_weights(folder / "final.zip")
 
 
 @pytest.mark.parametrize(
@@ -65,7 +56,7 @@ def test_training_resumed_from_an_exact_checkpoint_gives_the_uninterrupted_weigh
     expected = _weights(uninterrupted, tmp_path)
     folder = tmp_path / "checkpoints"
     saving = build(make_env()).learn(TOTAL, callback=ExactCheckpointCallback(30, str(folder)))
-    assert _same(_weights(saving, tmp_path), expected)  # saving changes nothing
+    assert same(_weights(saving, tmp_path), expected)  # saving changes nothing
     checkpoints = sorted(folder.glob("*_steps.zip"), key=lambda path: int(path.stem.split("_")[-2]))
     steps = [int(path.stem.split("_")[-2]) for path in checkpoints]
     # at the first episode end after every 30 steps
@@ -78,7 +69,7 @@ def test_training_resumed_from_an_exact_checkpoint_gives_the_uninterrupted_weigh
     for checkpoint in [path for path, n in zip(checkpoints, steps, strict=True) if n < TOTAL]:
         model = load_checkpoint(checkpoint, make_env(), algorithm)
         model.learn(TOTAL - model.num_timesteps, reset_num_timesteps=False)
-        assert _same(_weights(model, tmp_path), expected), f"resumed from {checkpoint.name}"
+        assert same(_weights(model, tmp_path), expected), f"resumed from {checkpoint.name}"
     if algorithm is None:
         assert [entry["phase"] for entry in model.curriculum_state["history"]] == ["destination", "mqi"]
 
@@ -109,6 +100,27 @@ def test_a_checkpoint_resumed_on_an_env_built_otherwise_is_refused(tmp_path):
 def test_a_save_frequency_that_is_not_a_positive_count_is_refused(tmp_path, save_freq):
     with pytest.raises(ValueError, match=f"save_freq must be a positive number of calls, got {save_freq!r}"):
         ExactCheckpointCallback(save_freq, str(tmp_path))
+
+
+@pytest.mark.parametrize("keep_last", [0, -1, 1.5, True])
+def test_a_number_of_checkpoints_to_keep_that_is_not_a_positive_count_is_refused(tmp_path, keep_last):
+    with pytest.raises(ValueError, match=f"keep_last must be a positive number of checkpoints or None, got {keep_last!r}"):
+        ExactCheckpointCallback(100, str(tmp_path), keep_last=keep_last)
+
+
+def test_keep_last_keeps_the_latest_checkpoints_of_its_prefix_only(tmp_path):
+    env = gym.make("Pendulum-v1", max_episode_steps=50)
+    other = tmp_path / "other_50_steps.zip"
+    other.write_bytes(b"")  # another prefix's file in the folder: not this callback's to remove
+    _ddpg(env).learn(300, callback=ExactCheckpointCallback(50, str(tmp_path), keep_last=2))
+    assert sorted(path.name for path in tmp_path.iterdir()) == [
+        "other_50_steps.zip",
+        *(
+            f"rl_model_{part}{steps}_steps.{ext}"
+            for part, ext in [("", "zip"), ("replay_buffer_", "pkl"), ("training_state_", "pkl")]
+            for steps in (250, 300)
+        ),
+    ]
 
 
 @pytest.mark.parametrize(

@@ -5,7 +5,7 @@ import dataclasses
 import json
 
 import pytest
-import torch as th
+from bitwise import same
 from stable_baselines3.common.save_util import load_from_zip_file
 
 from sb3_dtdpg.common.training_state import TRAINING_STATE
@@ -15,17 +15,6 @@ from sb3_dtdpg.experiments.runs import PeriodicCheckpoint, RunSpec, prepare_run,
 # 6 episodes of 60 steps at most; the paper's settings learn from step 100, DT-DPG's transfer comes after episode 4
 DDPG = RunSpec("ddpg", "noma", 0, 6, scenario="small", eval_episodes=2, observation="paper")
 DTDPG = dataclasses.replace(DDPG, algo="dtdpg")
-
-
-def _same(a, b) -> bool:
-    """Whether two nested records of tensors, arrays and numbers are equal, bit for bit."""
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[key], b[key]) for key in a)
-    if isinstance(a, list | tuple):
-        return isinstance(b, list | tuple) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    if isinstance(a, th.Tensor):
-        return isinstance(b, th.Tensor) and a.dtype == b.dtype and a.shape == b.shape and bool((a == b).all())
-    return a == b
 
 
 def _trained(out, spec):
@@ -49,7 +38,7 @@ def _interrupt_at(patch, episodes: int) -> None:
 
 
 def _assert_same_training(resumed, uninterrupted, resumed_params, uninterrupted_params):
-    assert _same(resumed_params, uninterrupted_params)  # weights, target networks, Adam's moments and step counts
+    assert same(resumed_params, uninterrupted_params)  # weights, target networks, Adam's moments and step counts
     assert resumed["train"]["timesteps"] == uninterrupted["train"]["timesteps"]
     assert json.dumps(resumed["eval"], sort_keys=True) == json.dumps(uninterrupted["eval"], sort_keys=True)
     assert resumed["curriculum_state"] == uninterrupted["curriculum_state"]

@@ -28,7 +28,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from sb3_dtdpg.common import training_state
 from sb3_dtdpg.common.files import atomic_write
 
-__all__ = ["ExactCheckpointCallback", "checkpoint_files", "load_checkpoint"]
+__all__ = ["ExactCheckpointCallback", "checkpoint_files", "checkpoint_steps", "load_checkpoint"]
 
 #: The parts of a checkpoint: SB3's ``CheckpointCallback`` types (``<prefix>_<type><steps>_steps.<extension>``).
 _REPLAY_BUFFER, _TRAINING_STATE = "replay_buffer_", "training_state_"
@@ -50,13 +50,20 @@ class ExactCheckpointCallback(CheckpointCallback):
     :param save_freq: Save a checkpoint every ``save_freq`` calls of the callback (env steps of the vector env)
     :param save_path: Folder of the checkpoints
     :param name_prefix: Common prefix of the files
+    :param keep_last: Keep only the latest ``keep_last`` checkpoints of this prefix in the folder, each removed once
+        a newer one is saved whole (None: keep them all, as SB3's callback does); each holds a replay buffer
     :param verbose: 2: say where each checkpoint goes
     """
 
-    def __init__(self, save_freq: int, save_path: str, name_prefix: str = "rl_model", verbose: int = 0):
+    def __init__(
+        self, save_freq: int, save_path: str, name_prefix: str = "rl_model", keep_last: int | None = None, verbose: int = 0
+    ):
         if isinstance(save_freq, bool) or not isinstance(save_freq, int) or save_freq < 1:
             raise ValueError(f"save_freq must be a positive number of calls, got {save_freq!r}")
+        if keep_last is not None and (isinstance(keep_last, bool) or not isinstance(keep_last, int) or keep_last < 1):
+            raise ValueError(f"keep_last must be a positive number of checkpoints or None, got {keep_last!r}")
         super().__init__(save_freq, save_path, name_prefix, save_replay_buffer=True, verbose=verbose)
+        self.keep_last = keep_last
         self._due = False
         self._episode_ended = False
 
@@ -98,6 +105,20 @@ class ExactCheckpointCallback(CheckpointCallback):
         model_path = atomic_write(self._checkpoint_path(extension="zip"), self.model.save)
         if self.verbose >= 2:
             print(f"Saving an exact checkpoint to {model_path}")
+        if self.keep_last is not None:
+            self._remove_older()
+
+    def _remove_older(self) -> None:
+        """Remove this prefix's checkpoints but the latest ``keep_last``, each model file first (it is then not loadable)."""
+        saved = [
+            model_file
+            for model_file in Path(self.save_path).glob("*_steps.zip")
+            if (match := _MODEL_FILE.fullmatch(model_file.name)) is not None and match["prefix"] == self.name_prefix
+        ]
+        saved.sort(key=checkpoint_steps)
+        for model_file in saved[: -self.keep_last]:
+            for file in _parts(model_file):
+                file.unlink(missing_ok=True)
 
 
 def checkpoint_files(path: str | Path) -> tuple[Path, Path, Path]:
@@ -113,7 +134,7 @@ def checkpoint_files(path: str | Path) -> tuple[Path, Path, Path]:
         complete = [files for files in candidates if all(file.is_file() for file in files)]
         if not complete:
             raise FileNotFoundError(f"{path} holds no checkpoint of ExactCheckpointCallback (<prefix>_<steps>_steps.zip)")
-        return max(complete, key=lambda files: (_steps(files[0]), files[0].name))
+        return max(complete, key=lambda files: (checkpoint_steps(files[0]), files[0].name))
     if _MODEL_FILE.fullmatch(path.name) is None:
         raise FileNotFoundError(f"{path} is not a checkpoint of ExactCheckpointCallback (<prefix>_<steps>_steps.zip)")
     files = _parts(path)
@@ -123,8 +144,9 @@ def checkpoint_files(path: str | Path) -> tuple[Path, Path, Path]:
     return files
 
 
-def _steps(model_file: Path) -> int:
-    match = _MODEL_FILE.fullmatch(model_file.name)
+def checkpoint_steps(model_file: str | Path) -> int:
+    """:return: the env steps trained before a checkpoint of :class:`ExactCheckpointCallback`, given its model file"""
+    match = _MODEL_FILE.fullmatch(Path(model_file).name)
     assert match is not None
     return int(match["steps"])
 
