@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise, VectorizedActionNoise
 
+from sb3_dtdpg import DTDPG
 from sb3_dtdpg.common.noise import (
     LinearDecayOUNoise,
     NormalNoise,
@@ -156,6 +157,21 @@ def test_deepcopy_of_a_single_noise_shares_only_the_schedule():
     assert not np.allclose(clone.noise_prev, noise.noise_prev)
     clone.reset()
     assert noise.episode == 1
+
+
+def test_a_deep_copy_of_what_holds_the_noise_has_a_schedule_of_its_own():
+    """A copied model trains without moving the original's schedule; its per-env copies still share one."""
+    vectorized = VectorizedActionNoise(LinearDecayOUNoise(np.zeros(1), 0.5, 0.1, 10), 2)
+    model = DTDPG("MlpPolicy", "Pendulum-v1", seed=0)
+    model.action_noise = vectorized
+    copied = copy.deepcopy(model)
+    copied.action_noise.noises[1]()
+    copied.action_noise.noises[1].reset()
+    assert copied.action_noise.noises[0].episode == copied.action_noise.base_noise.episode == 1
+    assert model.action_noise.noises[0].episode == 0
+    holder = copy.deepcopy([model.action_noise.noises[0]])
+    _run_episode(holder[0])
+    assert model.action_noise.noises[0].episode == 0
 
 
 def test_rearm_and_sigma_of_the_constant_noises():

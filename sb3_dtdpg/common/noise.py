@@ -119,8 +119,10 @@ class LinearDecayOUNoise(ActionNoise):
     The copies keep their own OU state but **share one episode counter**: the schedule advances once per
     finished episode of *any* environment, so ``decay_episodes`` counts episodes in total, like the
     curriculum's episode budgets, whatever the number of environments. This sharing is implemented in
-    ``__deepcopy__``; a pickle round-trip (``model.save`` / ``load``) keeps the sharing between the copies
-    it saves together, and ``pickle.loads(pickle.dumps(noise))`` gives a fully independent copy.
+    ``__deepcopy__``, for a deep copy of the noise itself: a deep copy of something that holds it (a model, a
+    ``VectorizedActionNoise``) gets a schedule of its own, shared between the copies it holds. A pickle round-trip
+    (``model.save`` / ``load``) keeps the sharing between the copies it saves together, and
+    ``pickle.loads(pickle.dumps(noise))`` gives a fully independent copy.
 
     :param mean: Mean of the noise (its shape is the action shape)
     :param sigma: Initial scale of the noise (a number or one value per action dimension)
@@ -256,8 +258,8 @@ class LinearDecayOUNoise(ActionNoise):
         self.process.noise_prev = state["noise_prev"]
 
     def __deepcopy__(self, memo: dict[int, Any]) -> "LinearDecayOUNoise":
-        # Share the schedule between copies (SB3's VectorizedActionNoise deep-copies the noise per env)
-        memo[id(self._schedule)] = self._schedule
+        if not memo:  # the noise itself is copied, as SB3's VectorizedActionNoise does per env: share the schedule
+            memo[id(self._schedule)] = self._schedule
         clone = self.__class__.__new__(self.__class__)
         memo[id(self)] = clone
         clone.__dict__.update(copy.deepcopy(self.__dict__, memo))
