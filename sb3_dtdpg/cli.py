@@ -362,9 +362,24 @@ def _any_env_settings(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+def _any_env_logger(args: argparse.Namespace, run_name: str, resumed_at: int | None) -> Any:
+    """
+    The logger of a ``train`` run on another env: TensorBoard and ``progress.csv`` in ``<tb>/<run>_<N>``, a new
+    ``N`` for a fresh run (SB3's numbering) and the last one for a resumed run, which keeps its logs up to the
+    checkpoint and hides the interrupted attempt's after it (:func:`sb3_dtdpg.experiments.storage.run_logger`).
+    """
+    from stable_baselines3.common.utils import get_latest_run_id
+
+    from sb3_dtdpg.experiments.storage import run_logger
+
+    latest = get_latest_run_id(args.tb, run_name)
+    resumed = resumed_at is not None and latest > 0
+    folder = Path(args.tb) / f"{run_name}_{latest if resumed else latest + 1}"
+    return run_logger(folder, args.verbose, resumed_at if resumed else None)
+
+
 def _train_any_env_run(args: argparse.Namespace, env: Any, run_name: str) -> int:
     """:func:`_train_any_env` under the run's lock."""
-    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
     from stable_baselines3.common.evaluation import evaluate_policy
 
     from sb3_dtdpg.baselines import algorithm_class, make_model, mission_callbacks
@@ -392,14 +407,17 @@ def _train_any_env_run(args: argparse.Namespace, env: Any, run_name: str) -> int
     else:
         model.tensorboard_log, model.verbose = args.tb, args.verbose
         print(f"{run_name}: resuming after {resumed_at} steps ({model._episode_num} episodes) from {folder}")
-    callbacks = [EpisodeReturnLogger(), *mission_callbacks(model)]
-    if max_steps is not None:
-        callbacks.append(env_runs.checkpoint_callback(folder, run_name, args.checkpoint_every * max_steps))
+    model.set_logger(_any_env_logger(args, run_name, resumed_at))
+    done = model._episode_num  # episodes trained before the checkpoint (0: a fresh run)
     if args.timesteps is not None:
         total, to_go = args.timesteps, args.timesteps - model.num_timesteps
+        episodes = EpisodeReturnLogger(start=done)
     else:
-        total, to_go = args.episodes * max_steps, args.episodes - model._episode_num
-        callbacks.append(StopTrainingOnMaxEpisodes(to_go))
+        total, to_go = args.episodes * max_steps, args.episodes - done
+        episodes = EpisodeReturnLogger(start=done, max_episodes=to_go)  # stops the training at --episodes
+    callbacks = [episodes, *mission_callbacks(model)]
+    if max_steps is not None:
+        callbacks.append(env_runs.checkpoint_callback(folder, run_name, args.checkpoint_every * max_steps))
     try:
         if to_go > 0:  # 0: the checkpoint was saved as the training ended, before its model
             model.learn(
@@ -411,6 +429,7 @@ def _train_any_env_run(args: argparse.Namespace, env: Any, run_name: str) -> int
                 progress_bar=not args.no_progress,
             )
     except KeyboardInterrupt:  # as the RL Zoo does, the model so far is kept too
+        model.logger.close()
         out.mkdir(parents=True, exist_ok=True)
         # A free name: the model of an earlier interruption of the same command stays
         saved = atomic_write(unused_path(out, f"{run_name}_interrupted", ".zip"), model.save)
@@ -423,6 +442,7 @@ def _train_any_env_run(args: argparse.Namespace, env: Any, run_name: str) -> int
             then = f"no checkpoint yet (one every {args.checkpoint_every} episodes): the same command starts afresh"
         print(f"interrupted after {model.num_timesteps} steps: the model so far is in {saved}; {then}", file=sys.stderr)
         return 130
+    model.logger.close()
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / f"{run_name}.zip", model.save)
     env_runs.remove_checkpoints(folder)

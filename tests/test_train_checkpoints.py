@@ -1,8 +1,10 @@
 """``sb3-dtdpg train`` on an env without missions (``Pendulum-v1``): its checkpoints, from which the same command
 resumes the run as the uninterrupted one goes on, bit for bit; a command with other options is refused."""
 
+import pandas as pd
 import pytest
 from bitwise import same, saved_weights
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from sb3_dtdpg.cli import main
 from sb3_dtdpg.experiments.run_callbacks import EpisodeReturnLogger
@@ -48,6 +50,13 @@ def test_a_train_interrupted_twice_resumes_to_the_uninterrupted_weights(algo, bu
     assert f"{name}: 1200 steps (resumed after step 800)" in capsys.readouterr().out
 
     assert same(saved_weights(out / f"{name}.zip"), saved_weights(tmp_path / "whole" / f"{name}.zip"))
+    board = EventAccumulator(str(out / "tb" / f"{name}_1"))  # what TensorBoard shows: each episode once
+    board.Reload()
+    assert [event.step for event in board.Scalars("episode/number")] == [200, 400, 600, 800, 1000, 1200]
+    logged = pd.read_csv(out / "tb" / f"{name}_1" / "progress.csv")
+    whole = pd.read_csv(tmp_path / "whole" / "tb" / f"{name}_1" / "progress.csv")
+    assert list(logged["episode/number"].dropna()) == [1, 2, 3, 4, 5, 6]  # one row per episode, counted on
+    pd.testing.assert_series_equal(logged["episode/return"], whole["episode/return"])  # the uninterrupted run's
     assert not folder.exists()  # removed once the model is saved
     assert len(list(out.glob(f"{name}_interrupted*.zip"))) == 2  # the models at each Ctrl-C, as before
 
