@@ -347,18 +347,18 @@ def _train_any_env(args: argparse.Namespace, env: Any) -> int:
 
 
 def _any_env_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """What a run of ``train`` on another env trains with, by option: a resume must give the same."""
+    """What a run of ``train`` on another env trains with, by option dest: a resume must give the same."""
     from sb3_dtdpg.overrides import override_text
 
     return {
-        "--algo": args.algo,
-        "--env": args.env,
-        "--seed": args.seed,
-        "--preset": args.hyperparams,
-        "--hyperparams": " ".join(f"{name}:{override_text(value)}" for name, value in args.overrides.items()) or None,
-        "--learning-rate": args.learning_rate,
-        "--timesteps": args.timesteps,
-        "--episodes": None if args.timesteps is not None else args.episodes,
+        "algo": args.algo,
+        "env": args.env,
+        "seed": args.seed,
+        "preset": args.hyperparams,
+        "hyperparams": " ".join(f"{name}:{override_text(value)}" for name, value in args.overrides.items()) or None,
+        "learning_rate": args.learning_rate,
+        "timesteps": args.timesteps,
+        "episodes": None if args.timesteps is not None else args.episodes,
     }
 
 
@@ -405,7 +405,7 @@ def _train_any_env_run(args: argparse.Namespace, env: Any, run_name: str) -> int
             **args.overrides,
         )
     else:
-        model.tensorboard_log, model.verbose = args.tb, args.verbose
+        model.verbose = args.verbose
         print(f"{run_name}: resuming after {resumed_at} steps ({model._episode_num} episodes) from {folder}")
     model.set_logger(_any_env_logger(args, run_name, resumed_at))
     done = model._episode_num  # episodes trained before the checkpoint (0: a fresh run)
@@ -424,7 +424,6 @@ def _train_any_env_run(args: argparse.Namespace, env: Any, run_name: str) -> int
                 total_timesteps=total - model.num_timesteps,
                 callback=callbacks,
                 log_interval=1,
-                tb_log_name=run_name,
                 reset_num_timesteps=resumed_at is None,
                 progress_bar=not args.no_progress,
             )

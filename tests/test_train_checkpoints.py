@@ -70,7 +70,7 @@ def test_a_train_with_other_options_does_not_resume_a_checkpoint(tmp_path, monke
         main([*args, "--learning-rate", "0.0005"])
     assert exited.value.code == 2
     message = capsys.readouterr().err.strip().splitlines()[-1]
-    assert "holds a checkpoint of a run with --learning-rate (not given), this command gives 0.0005" in message
+    assert "was run with --learning-rate (unset); this command asks for --learning-rate 0.0005" in message
     assert (tmp_path / "ddpg_Pendulum-v1_s0_checkpoints" / "ddpg_Pendulum-v1_s0_400_steps.zip").is_file()  # kept
 
 

@@ -110,11 +110,7 @@ class ExactCheckpointCallback(CheckpointCallback):
 
     def _remove_older(self) -> None:
         """Remove this prefix's checkpoints but the latest ``keep_last``, each model file first (it is then not loadable)."""
-        saved = [
-            model_file
-            for model_file in Path(self.save_path).glob("*_steps.zip")
-            if (match := _MODEL_FILE.fullmatch(model_file.name)) is not None and match["prefix"] == self.name_prefix
-        ]
+        saved = [model_file for model_file in _model_files(Path(self.save_path)) if _prefix(model_file) == self.name_prefix]
         saved.sort(key=checkpoint_steps)
         for model_file in saved[: -self.keep_last]:
             for file in _parts(model_file):
@@ -130,7 +126,7 @@ def checkpoint_files(path: str | Path) -> tuple[Path, Path, Path]:
     """
     path = Path(path)
     if path.is_dir():
-        candidates = [_parts(model_file) for model_file in path.glob("*_steps.zip") if _MODEL_FILE.fullmatch(model_file.name)]
+        candidates = [_parts(model_file) for model_file in _model_files(path)]
         complete = [files for files in candidates if all(file.is_file() for file in files)]
         if not complete:
             raise FileNotFoundError(f"{path} holds no checkpoint of ExactCheckpointCallback (<prefix>_<steps>_steps.zip)")
@@ -142,6 +138,17 @@ def checkpoint_files(path: str | Path) -> tuple[Path, Path, Path]:
         if not file.is_file():
             raise FileNotFoundError(f"the checkpoint {path} has no {file.name}")
     return files
+
+
+def _model_files(folder: Path) -> list[Path]:
+    """:return: the model files of :class:`ExactCheckpointCallback`'s checkpoints in ``folder`` (whole or not)"""
+    return [model_file for model_file in folder.glob("*_steps.zip") if _MODEL_FILE.fullmatch(model_file.name)]
+
+
+def _prefix(model_file: Path) -> str:
+    match = _MODEL_FILE.fullmatch(model_file.name)
+    assert match is not None
+    return match["prefix"]
 
 
 def checkpoint_steps(model_file: str | Path) -> int:

@@ -10,7 +10,6 @@ latest checkpoint. Once the trained model is saved as ``<run>.zip``, :func:`remo
 
 from __future__ import annotations
 
-import json
 import shutil
 from pathlib import Path
 from typing import Any
@@ -19,9 +18,9 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.type_aliases import GymEnv
 
 from sb3_dtdpg.common.checkpoints import ExactCheckpointCallback, checkpoint_files, load_checkpoint
-from sb3_dtdpg.common.files import atomic_write
+from sb3_dtdpg.common.files import write_json
 from sb3_dtdpg.experiments.specs import RunMismatchError
-from sb3_dtdpg.experiments.storage import DamagedRecordError
+from sb3_dtdpg.experiments.storage import DamagedRecordError, settings_mismatch
 
 __all__ = ["checkpoint_callback", "checkpoint_folder", "latest_checkpoint", "remove_checkpoints", "resume"]
 
@@ -58,27 +57,27 @@ def resume(folder: Path, settings: dict[str, Any], env: GymEnv, algorithm: type[
     recorded for the checkpoints to come.
 
     :param folder: the run's :func:`checkpoint_folder`
-    :param settings: the options the run trains with, by option name (values JSON writes and reads back as they are)
+    :param settings: the options the run trains with, by ``argparse`` dest
+        (:func:`~sb3_dtdpg.experiments.storage.settings_mismatch` compares them)
     :param env: the training env, built as the run's was (:func:`~sb3_dtdpg.common.checkpoints.load_checkpoint`)
     :param algorithm: the model's class
-    :raises RunMismatchError: the checkpoint was trained with other options (the message names the first that differs)
-    :raises DamagedRecordError: the checkpoint or its settings record cannot be read
+    :raises RunMismatchError: the checkpoint was trained with other options (the message names each that differs), or
+        its record of them cannot be read
+    :raises DamagedRecordError: the checkpoint cannot be loaded
     """
     from sb3_dtdpg.baselines import without_n_step_load_warning
 
-    model_file = latest_checkpoint(folder)
+    model_file, record = latest_checkpoint(folder), folder / SETTINGS_FILE
     if model_file is None:
         folder.mkdir(parents=True, exist_ok=True)
-        atomic_write(folder / SETTINGS_FILE, lambda path: Path(path).write_text(json.dumps(settings, indent=2) + "\n"))
+        write_json(record, {"settings": settings}, indent=2)
         return None
-    recorded = _recorded_settings(folder)
-    for option, value in settings.items():
-        if option not in recorded or recorded[option] != value:
-            was = _shown(recorded[option]) if option in recorded else "not recorded"
-            raise RunMismatchError(
-                f"{folder} holds a checkpoint of a run with {option} {was}, this command gives {_shown(value)}: give the "
-                f"same options to resume it, another --out or --tag for another run, or delete {folder} to train afresh"
-            )
+    mismatch = settings_mismatch(record, settings) if record.is_file() else f"{record} is missing"
+    if mismatch is not None:
+        raise RunMismatchError(
+            f"{mismatch}: {folder} holds its checkpoint; give the same options to resume it, another --out or --tag for "
+            f"another run, or delete {folder} to train afresh"
+        )
     try:
         with without_n_step_load_warning():
             return load_checkpoint(model_file, env, algorithm)
@@ -91,21 +90,3 @@ def resume(folder: Path, settings: dict[str, Any], env: GymEnv, algorithm: type[
 def remove_checkpoints(folder: Path) -> None:
     """Remove a run's checkpoint folder, once its trained model is saved."""
     shutil.rmtree(folder, ignore_errors=True)
-
-
-def _recorded_settings(folder: Path) -> dict[str, Any]:
-    path = folder / SETTINGS_FILE
-    try:
-        recorded = json.loads(path.read_text())
-    except (OSError, ValueError) as error:
-        raise DamagedRecordError(
-            f"{path}: the record of the options of the checkpoint beside it cannot be read ({error}); delete {folder} "
-            "to train afresh"
-        ) from error
-    if not isinstance(recorded, dict):
-        raise DamagedRecordError(f"{path}: not a record of options; delete {folder} to train afresh")
-    return recorded
-
-
-def _shown(value: Any) -> str:
-    return "(not given)" if value is None else repr(value) if isinstance(value, str) else str(value)
